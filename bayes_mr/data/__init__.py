@@ -1,0 +1,1 @@
+"""Measured and simulated records: one validated xarray schema (see schema.py)."""
