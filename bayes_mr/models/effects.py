@@ -1,0 +1,143 @@
+"""The eight effects of the SPEC, each an extension that composes with any form.
+
+An effect is what a model can miss in a measured record; switched on, it adds
+parameters (and sometimes a state) to the model. The kernel applies them as:
+
+* ``force_offset`` — f_r += f0 (accumulator preload, load-cell bias);
+* ``voltage_dependence`` — filtered voltage u̇ = η(v − u); hysteretic force
+  × (1 + a_v·u) and an added viscous term c_v·u·ẋ;
+* ``stiffness_drift`` — stiffness and hysteretic strength × (1 + drift·t);
+* ``asymmetry`` — hysteretic force × (1 + asym·sgn z): yield force
+  (1 ± asym)·F in tension and compression;
+* ``small_amplitude_regime`` — hysteretic strength × r_s while the
+  displacement amplitude envelope (peak-following, decay time ``t_env``)
+  is below x_s, with a smooth switch 10 % of x_s wide;
+* ``low_velocity_rolloff`` — a series dashpot c_s: the hysteretic element
+  moves at ẋ − F_h/c_s, so the force rolls off at low velocity;
+* ``sensor_delay`` — one measured channel lags the others by ``delay``
+  seconds (applied to the simulated output; fractional samples by linear
+  interpolation);
+* ``cubic_stiffness`` — a hardening frame, f_r += k3·x³.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .params import ParamSpec
+
+
+@dataclass(frozen=True)
+class Effect:
+    """An extension of a model form.
+
+    Attributes
+    ----------
+    name : str
+        SPEC name.
+    description : str
+        What happens in the device or frame.
+    params : tuple of ParamSpec
+        Added parameters; the first is the *primary* one, set by
+        ``--effect NAME=value``.
+    states : tuple of str
+        Added states.
+    options : dict
+        Non-estimated settings (``channel`` of ``sensor_delay``; ``t_env``
+        of ``small_amplitude_regime``).
+    needs_voltage : bool
+        Only meaningful when the record has a varying voltage channel.
+    """
+
+    name: str
+    description: str
+    params: tuple[ParamSpec, ...] = ()
+    states: tuple[str, ...] = ()
+    options: dict = field(default_factory=dict, compare=False, hash=False)
+    needs_voltage: bool = False
+
+    @property
+    def primary(self) -> str:
+        return self.params[0].name
+
+    def with_options(self, **options) -> "Effect":
+        """A copy with ``options`` changed (unknown option names are an error)."""
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise ValueError(
+                f"effect '{self.name}' has no option {sorted(unknown)}; options: {sorted(self.options) or 'none'}"
+            )
+        return Effect(self.name, self.description, self.params, self.states, {**self.options, **options}, self.needs_voltage)
+
+    def __add__(self, other):
+        raise TypeError("add effects to a form or model: Dahl() + ForceOffset(), not effect + effect")
+
+
+FORCE_OFFSET = Effect(
+    "force_offset",
+    "a constant force f0 added to f_r (accumulator preload, load-cell bias)",
+    (ParamSpec("f0", "N", "constant force offset", 0.0, (1, 0, 0, 0), (0.0, 1.0), positive=False),),
+)
+VOLTAGE_DEPENDENCE = Effect(
+    "voltage_dependence",
+    "damper strength depends on the command voltage through a first-order lag",
+    (
+        ParamSpec("a_v", "1/V", "hysteretic strength gain per volt of filtered voltage", 1.0, (0, 0, 0, 0), (1e-3, 100.0)),
+        ParamSpec("c_v", "N·s/(m·V)", "viscous damping per volt of filtered voltage", 300.0, (1, 0, -1, 0), (1e-5, 10.0)),
+        ParamSpec("eta", "1/s", "voltage lag: 1/time constant", 190.0, (0, -1, 1, 0), (0.01, 100.0)),
+    ),
+    ("u",),
+    needs_voltage=True,
+)
+STIFFNESS_DRIFT = Effect(
+    "stiffness_drift",
+    "a stiffness or strength that drifts with time over the record (heating)",
+    (ParamSpec("drift", "1/s", "relative change of stiffness and strength per second", 0.0, (0, 0, 0, -1), (0.0, 0.5), positive=False),),
+)
+ASYMMETRY = Effect(
+    "asymmetry",
+    "different yield force in tension and compression (misaligned paddle)",
+    (ParamSpec("asym", "-", "relative yield-force difference: (1 ± asym)·F", 0.0, (0, 0, 0, 0), (0.0, 0.9), positive=False),),
+)
+SMALL_AMPLITUDE_REGIME = Effect(
+    "small_amplitude_regime",
+    "a different hysteresis below a displacement threshold (thesis §5.2: under 2 mm)",
+    (
+        ParamSpec("r_s", "-", "hysteretic strength below the threshold relative to above", 0.5, (0, 0, 0, 0), (0.02, 50.0)),
+        ParamSpec("x_s", "m", "displacement-amplitude threshold", 0.002, (0, 1, 0, 0), (0.05, 1.0)),
+    ),
+    ("envelope",),
+    options={"t_env": 1.0},
+)
+LOW_VELOCITY_ROLLOFF = Effect(
+    "low_velocity_rolloff",
+    "force rolls off at low velocity (series dashpot, as in spencer)",
+    (ParamSpec("c_s", "N·s/m", "series dashpot", 1.0e4, (1, 0, -1, 0), (0.1, 1000.0)),),
+)
+SENSOR_DELAY = Effect(
+    "sensor_delay",
+    "one measured channel lags the others by a few samples",
+    (ParamSpec("delay", "s", "lag of the delayed channel", 1e-3, (0, 0, 0, 0), (1e-5, 0.05)),),
+    options={"channel": None},
+)
+CUBIC_STIFFNESS = Effect(
+    "cubic_stiffness",
+    "a hardening frame, k3·x³",
+    (ParamSpec("k3", "N/m³", "cubic stiffness", 1e8, (1, -3, 0, 0), (1e-3, 10.0)),),
+)
+
+EFFECTS: dict[str, Effect] = {
+    e.name: e
+    for e in (
+        FORCE_OFFSET,
+        VOLTAGE_DEPENDENCE,
+        STIFFNESS_DRIFT,
+        ASYMMETRY,
+        SMALL_AMPLITUDE_REGIME,
+        LOW_VELOCITY_ROLLOFF,
+        SENSOR_DELAY,
+        CUBIC_STIFFNESS,
+    )
+}
+#: What diagnose answers when the model explains the data to the noise level.
+NONE = "none"

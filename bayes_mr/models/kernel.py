@@ -1,0 +1,451 @@
+"""Compiled right-hand sides of every model form and effect (numba).
+
+One kernel serves all models: the model's *layout* (an int64 array built by
+:meth:`bayes_mr.models.Model.layout`) says which form is active, where its
+parameters and states sit, and which effects are switched on. Compiling one
+kernel instead of one per combination keeps the first call of any
+``FORM+EFFECT+EFFECT`` model as fast as the thousandth, and lets numba cache
+the machine code on disk.
+
+Conventions
+-----------
+State ``s`` of a structure test: ``[x, ẋ, form states…, effect states…]``;
+of a device test: ``[form states…, effect states…]`` (x and ẋ are inputs).
+Input row ``a`` (3,): structure ``[ẍ_g, 0, v]``; device ``[x, ẋ, v]``,
+linear in time between samples. ``p`` holds natural (SI) parameters.
+Time ``t`` is measured from the first sample.
+
+Equations are those of ``../shared/SPEC.md`` (thesis 3-31/32, 3-52..3-70,
+Spencer et al. 1997) with ``|z|^{n-1} z`` written ``sgn(z)|z|^n``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# --- form codes -------------------------------------------------------------
+NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
+# --- kinds ------------------------------------------------------------------
+STRUCT, DEVICE = 0, 1
+
+# --- layout slots (int64 array) ---------------------------------------------
+L_FORM = 0  # form code
+L_KIND = 1  # STRUCT or DEVICE
+L_PFORM = 2  # index in p of the form's first parameter
+L_PFRAME = 3  # index of frame c (k at +1) when the form has no c, k of its own; else -1
+L_SFORM = 4  # index in s of the form's first state
+L_NS = 5  # number of states
+L_F0 = 6  # force_offset: f0
+L_VD = 7  # voltage_dependence: a_v, c_v, eta
+L_SU = 8  # state index of the filtered voltage (voltage_dependence)
+L_DRIFT = 9  # stiffness_drift: drift
+L_ASYM = 10  # asymmetry: asym
+L_SA = 11  # small_amplitude_regime: r_s, x_s
+L_SE = 12  # state index of the amplitude envelope
+L_LVR = 13  # low_velocity_rolloff: c_s
+L_K3 = 14  # cubic_stiffness: k3
+L_NP = 15  # number of parameters
+LAYOUT_SIZE = 16
+
+# --- constants (float64 array) ----------------------------------------------
+K_MASS = 0  # storey mass [kg] (structure tests)
+K_TENV = 1  # amplitude-envelope decay time [s]
+K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
+K_NMAX = 3  # most sub-steps per sample
+CONST_SIZE = 4
+
+
+@njit(cache=True, inline="always")
+def _sgn(v):
+    if v > 0.0:
+        return 1.0
+    if v < 0.0:
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _static_coef(form, p, o):
+    """Coefficient multiplying the hysteretic state in the force (k_z, F_d, β, k)."""
+    if form == NBW:
+        return p[o + 2]
+    if form == DAHL:
+        return p[o + 2]
+    if form == LUGRE:
+        return p[o + 2]
+    return p[o + 1]  # classic Bouc–Wen: k r
+
+
+@njit(cache=True, inline="always")
+def _zdot(form, p, o, w, z):
+    """Hysteretic state rate of the four single-state forms driven by velocity w."""
+    if form == NBW:
+        rho = p[o + 3]
+        n = p[o + 4]
+        sig = p[o + 5]
+        zn = math.pow(abs(z), n)
+        return rho * (w - sig * abs(w) * _sgn(z) * zn + (sig - 1.0) * w * zn)
+    if form == DAHL:
+        return p[o + 3] * w * (1.0 - z * _sgn(w))
+    if form == LUGRE:
+        return w - p[o + 4] * abs(w) * z
+    # classic Bouc–Wen (3-32)
+    beta1 = p[o + 2]
+    gam = p[o + 3]
+    n = p[o + 4]
+    rn = math.pow(abs(z), n)
+    return w - beta1 * abs(w) * _sgn(z) * rn - gam * w * rn
+
+
+@njit(cache=True)
+def deriv(lay, cst, p, t, a, s, ds):
+    """Evaluate ṡ = f(s, a(t); p) into ``ds``.
+
+    Returns
+    -------
+    f_r : float
+        Total restoring force [N] (frame + damper + effects).
+    f_d : float
+        Damper force [N] (the hysteretic part of f_r, with preload and
+        voltage-dependent viscous term when those effects are on).
+    """
+    form = lay[L_FORM]
+    kind = lay[L_KIND]
+    if kind == STRUCT:
+        x = s[0]
+        xd = s[1]
+    else:
+        x = a[0]
+        xd = a[1]
+    v = a[2]
+    o = lay[L_PFORM]
+    i = lay[L_SFORM]
+
+    # strength multiplier m_s (hysteretic force) and stiffness multiplier m_k
+    m_s = 1.0
+    m_k = 1.0
+    if lay[L_DRIFT] >= 0:
+        g = 1.0 + p[lay[L_DRIFT]] * t
+        m_s *= g
+        m_k = g
+    u = 0.0
+    if lay[L_VD] >= 0:
+        j = lay[L_VD]
+        iu = lay[L_SU]
+        u = s[iu]
+        ds[iu] = p[j + 2] * (v - u)
+        m_s *= 1.0 + p[j] * u
+    if lay[L_SA] >= 0:
+        j = lay[L_SA]
+        ie = lay[L_SE]
+        ds[ie] = 0.0  # the envelope is updated discretely after each sub-step
+        rs = p[j]
+        xs = p[j + 1]
+        arg = (s[ie] - xs) / (0.1 * xs)
+        if arg > 40.0:
+            sw = 1.0
+        elif arg < -40.0:
+            sw = 0.0
+        else:
+            sw = 1.0 / (1.0 + math.exp(-arg))
+        m_s *= rs + (1.0 - rs) * sw
+    asym = 0.0
+    if lay[L_ASYM] >= 0:
+        asym = p[lay[L_ASYM]]
+
+    if form == SPENCER:
+        aa = p[o]
+        ab = p[o + 1]
+        c0a = p[o + 2]
+        c0b = p[o + 3]
+        k0 = p[o + 4]
+        c1a = p[o + 5]
+        c1b = p[o + 6]
+        k1 = p[o + 7]
+        x0 = p[o + 8]
+        gam = p[o + 9]
+        bet = p[o + 10]
+        A = p[o + 11]
+        n = p[o + 12]
+        eta = p[o + 13]
+        y = s[i]
+        z = s[i + 1]
+        us = s[i + 2]
+        ds[i + 2] = eta * (v - us)
+        alpha = (aa + ab * us) * m_s
+        c0 = c0a + c0b * us
+        c1 = c1a + c1b * us
+        yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
+        r = xd - yd
+        zn = math.pow(abs(z), n)
+        ds[i] = yd
+        ds[i + 1] = -gam * abs(r) * _sgn(z) * zn - bet * r * zn + A * r
+        f_d = c1 * yd + m_k * k1 * (x - x0)
+        jf = lay[L_PFRAME]
+        if jf >= 0:
+            f_frame = p[jf] * xd + m_k * p[jf + 1] * x
+        else:
+            f_frame = 0.0
+    else:
+        c = p[o]
+        k = p[o + 1]
+        z = s[i]
+        f_s = m_s * _static_coef(form, p, o) * z * (1.0 + asym * _sgn(z))
+        w = xd
+        if lay[L_LVR] >= 0:
+            # series dashpot c_s: the hysteretic element moves at ẋ − F/c_s
+            w = xd - f_s / p[lay[L_LVR]]
+        zd = _zdot(form, p, o, w, z)
+        ds[i] = zd
+        f_d = f_s
+        if form == LUGRE:
+            f_d += m_s * p[o + 3] * zd  # ε ż
+        f_frame = c * xd + m_k * k * x
+
+    if lay[L_F0] >= 0:
+        f_d += p[lay[L_F0]]
+    if lay[L_VD] >= 0:
+        f_d += p[lay[L_VD] + 1] * u * xd
+    f_r = f_frame + f_d
+    if lay[L_K3] >= 0:
+        f_r += p[lay[L_K3]] * x * x * x
+    if kind == STRUCT:
+        ds[0] = xd
+        ds[1] = -a[0] - f_r / cst[K_MASS]
+    return f_r, f_d
+
+
+@njit(cache=True)
+def rate(lay, cst, p, t, s, vmax):
+    """Upper estimate of the fastest local rate |λ| [1/s] of the dynamics.
+
+    Used to choose RK4 sub-steps per sample (h·λ ≤ c_acc). ``vmax`` is the
+    largest |ẋ| expected over the step [m/s]; ``t`` the time [s].
+    """
+    form = lay[L_FORM]
+    o = lay[L_PFORM]
+    i = lay[L_SFORM]
+    asym = abs(p[lay[L_ASYM]]) if lay[L_ASYM] >= 0 else 0.0
+    m_s = 1.0 + asym
+    m_k = 1.0
+    if lay[L_DRIFT] >= 0:
+        m_k = 1.0 + abs(p[lay[L_DRIFT]]) * t
+        m_s *= m_k
+    u = 0.0
+    if lay[L_VD] >= 0:
+        u = abs(s[lay[L_SU]])
+        m_s *= 1.0 + abs(p[lay[L_VD]]) * u
+    lam = 0.0
+    coupling = 0.0
+    if form == SPENCER:
+        aa = p[o]
+        ab = p[o + 1]
+        c0a = p[o + 2]
+        c0b = p[o + 3]
+        k0 = p[o + 4]
+        c1a = p[o + 5]
+        c1b = p[o + 6]
+        gam = p[o + 9]
+        bet = p[o + 10]
+        A = p[o + 11]
+        n = p[o + 12]
+        eta = p[o + 13]
+        us = abs(s[i + 2])
+        alpha = (aa + ab * us) * m_s
+        c0 = c0a + c0b * us
+        c1 = c1a + c1b * us
+        z = abs(s[i + 1])
+        zsat = math.pow(A / (gam + bet), 1.0 / n)
+        zf = max(z, 0.1 * zsat) if n < 1.0 else max(z, zsat)
+        yd = (alpha * z + c0 * vmax + k0 * abs(s[i])) / (c0 + c1)
+        rr = vmax + abs(yd)
+        lam = n * math.pow(zf, n - 1.0) * (gam + bet) * rr
+        lam += (A + (gam + bet) * math.pow(zf, n)) * alpha / (c0 + c1)
+        lam += k0 / (c0 + c1) + eta
+        damp = c0 * c1 / (c0 + c1)
+        if lay[L_PFRAME] >= 0:
+            damp += p[lay[L_PFRAME]]
+            stiff = p[lay[L_PFRAME] + 1]
+        else:
+            stiff = 0.0
+        coupling = alpha * A
+    else:
+        z = abs(s[i])
+        coef = _static_coef(form, p, o) * m_s
+        damp = p[o]
+        stiff = p[o + 1]
+        if form == DAHL:
+            sig = p[o + 3]
+            lam = sig * vmax
+            slope = sig * (1.0 + z)
+        elif form == LUGRE:
+            alp = p[o + 4]
+            lam = alp * vmax
+            slope = 1.0 + alp * z
+            damp += p[o + 3] * m_s * slope
+        elif form == NBW:
+            rho = p[o + 3]
+            n = p[o + 4]
+            sg = p[o + 5]
+            zf = max(z, 0.1) if n < 1.0 else max(z, 1.0)
+            lam = rho * n * math.pow(zf, n - 1.0) * vmax * (sg + abs(sg - 1.0))
+            slope = rho * (1.0 + (sg + abs(sg - 1.0)) * math.pow(zf, n))
+        else:
+            beta1 = p[o + 2]
+            gam = p[o + 3]
+            n = p[o + 4]
+            bg = beta1 + abs(gam)
+            rsat = math.pow(1.0 / bg, 1.0 / n)
+            zf = max(z, 0.1 * rsat) if n < 1.0 else max(z, rsat)
+            lam = n * math.pow(zf, n - 1.0) * vmax * bg
+            slope = 1.0 + bg * math.pow(zf, n)
+        if lay[L_LVR] >= 0:
+            lam += slope * coef / p[lay[L_LVR]]
+        coupling = coef * slope
+    if lay[L_VD] >= 0:
+        lam += abs(p[lay[L_VD] + 2])
+        damp += abs(p[lay[L_VD] + 1]) * u
+    stiff *= m_k
+    if lay[L_KIND] == STRUCT:
+        m = cst[K_MASS]
+        if lay[L_K3] >= 0:
+            stiff += 3.0 * abs(p[lay[L_K3]]) * s[0] * s[0]
+        lam += damp / m + math.sqrt(abs(stiff) / m) + math.sqrt(abs(coupling) / m)
+    return lam
+
+
+@njit(cache=True)
+def substeps(lay, cst, lam, h):
+    """Number of RK4 sub-steps for a sample interval h with local rate λ."""
+    n = int(math.ceil(h * lam / cst[K_CACC]))
+    if n < 1:
+        n = 1
+    nmax = int(cst[K_NMAX])
+    if n > nmax:
+        n = nmax
+    return n
+
+
+@njit(cache=True, inline="always")
+def _interp(a0, a1, f, out):
+    for j in range(3):
+        out[j] = a0[j] + f * (a1[j] - a0[j])
+
+
+@njit(cache=True)
+def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
+    """Integrate ``s`` in place over one sample interval [t, t+h] with RK4.
+
+    ``k1`` must hold f(s, a0) on entry (it is reused for the first sub-step).
+    ``work`` is scratch of shape (5, ns + 3). Inputs are linear in time.
+    """
+    ns = lay[L_NS]
+    k2 = work[0]
+    k3 = work[1]
+    k4 = work[2]
+    tmp = work[3]
+    am = work[4]
+    hs = h / n_sub
+    for j in range(n_sub):
+        tj = t + j * hs
+        if j > 0:
+            _interp(a0, a1, j / n_sub, am)
+            deriv(lay, cst, p, tj, am, s, k1)
+        _interp(a0, a1, (j + 0.5) / n_sub, am)
+        for q in range(ns):
+            tmp[q] = s[q] + 0.5 * hs * k1[q]
+        deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k2)
+        for q in range(ns):
+            tmp[q] = s[q] + 0.5 * hs * k2[q]
+        deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k3)
+        _interp(a0, a1, (j + 1.0) / n_sub, am)
+        for q in range(ns):
+            tmp[q] = s[q] + hs * k3[q]
+        deriv(lay, cst, p, tj + hs, am, tmp, k4)
+        for q in range(ns):
+            s[q] += hs / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+        if lay[L_SA] >= 0:
+            # amplitude envelope: follows peaks at once, decays with time constant T_env
+            ie = lay[L_SE]
+            xa = abs(s[0]) if lay[L_KIND] == STRUCT else abs(am[0])
+            decayed = s[ie] * math.exp(-hs / cst[K_TENV])
+            s[ie] = xa if xa > decayed else decayed
+
+
+@njit(cache=True, inline="always")
+def _vmax(lay, cst, s, k1, a0, a1, h):
+    if lay[L_KIND] == STRUCT:
+        return abs(s[1]) + abs(k1[1]) * h
+    return max(abs(a0[1]), abs(a1[1]))
+
+
+@njit(cache=True, inline="always")
+def _write_out(lay, cst, s, f_r, f_d, out):
+    if lay[L_KIND] == STRUCT:
+        out[0] = s[0]
+        out[1] = s[1]
+        out[2] = -f_r / cst[K_MASS]
+        out[3] = f_d
+    else:
+        out[0] = f_r
+        out[1] = f_d
+
+
+@njit(cache=True)
+def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
+    """Simulate one parameter set from rest over all samples.
+
+    Parameters
+    ----------
+    out : ndarray, shape (N, n_out)
+        Structure: displacement, velocity, absolute acceleration, damper force.
+        Device: force (total), damper force.
+    schedule : int64 ndarray, shape (N-1,)
+        Sub-steps per interval: written when ``use_schedule`` is False, read
+        when True (so perturbed parameter sets integrate on the same grid).
+
+    Returns
+    -------
+    failed_at : int
+        Sample index where the state became non-finite, or -1.
+    """
+    ns = lay[L_NS]
+    N = inputs.shape[0]
+    s = np.zeros(ns)
+    k1 = np.zeros(ns)
+    work = np.zeros((5, max(ns, 3)))
+    for k in range(N):
+        t = k * h
+        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
+        _write_out(lay, cst, s, f_r, f_d, out[k])
+        if not math.isfinite(f_r):
+            out[k:, :] = np.nan
+            return k
+        if k == N - 1:
+            break
+        if use_schedule:
+            n_sub = schedule[k]
+        else:
+            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
+            n_sub = substeps(lay, cst, lam, h)
+            schedule[k] = n_sub
+        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
+    return -1
+
+
+@njit(cache=True, parallel=True)
+def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed):
+    """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
+
+    ``out`` has shape (B, N, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
+    When ``use_schedule`` is True every member uses ``schedules[0]``.
+    """
+    B = P.shape[0]
+    for b in prange(B):
+        if use_schedule:
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True)
+        else:
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False)

@@ -1,0 +1,220 @@
+"""A model = one form + any effects, bound to a kind of test when used.
+
+>>> from bayes_mr.models import DAHL, FORCE_OFFSET, get_model
+>>> (DAHL + FORCE_OFFSET).name
+'dahl+force_offset'
+>>> get_model("dahl+force_offset").free_names("device")
+('c', 'k', 'F_d', 'sigma', 'f0')
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import kernel
+from .effects import EFFECTS, NONE, Effect
+from .forms import FORMS, FRAME, Form
+from .params import Coordinates, ParamSpec, Scales
+
+KINDS = ("structure", "device")
+
+# Effects a form already contains.
+_BUILT_IN = {"spencer": ("voltage_dependence", "low_velocity_rolloff")}
+
+
+def _check_kind(kind: str) -> int:
+    if kind not in KINDS:
+        raise ValueError(f"unknown kind of test '{kind}'; valid: {', '.join(KINDS)}")
+    return kernel.STRUCT if kind == "structure" else kernel.DEVICE
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model form with effects switched on.
+
+    Build with ``Form + Effect`` (``DAHL + FORCE_OFFSET``) or
+    :func:`get_model` (``"dahl+force_offset"``).
+    """
+
+    form: Form
+    effects: tuple[Effect, ...] = ()
+
+    def __post_init__(self):
+        names = [e.name for e in self.effects]
+        if len(set(names)) != len(names):
+            raise ValueError(f"effect repeated in {self.name}")
+        for e in names:
+            if e in _BUILT_IN.get(self.form.name, ()):
+                raise ValueError(f"'{self.form.name}' already models {e}; drop '+{e}'")
+
+    def __add__(self, effect: Effect) -> "Model":
+        if not isinstance(effect, Effect):
+            raise TypeError(f"can only add an Effect to a model, not {type(effect).__name__}")
+        return Model(self.form, self.effects + (effect,))
+
+    @property
+    def name(self) -> str:
+        return self.form.name + "".join("+" + e.name for e in self.effects)
+
+    def effect(self, name: str) -> Effect | None:
+        for e in self.effects:
+            if e.name == name:
+                return e
+        return None
+
+    # --- parameters ----------------------------------------------------------
+    def param_specs(self, kind: str) -> tuple[ParamSpec, ...]:
+        """All parameters for a test of ``kind``, in kernel order."""
+        _check_kind(kind)
+        specs: list[ParamSpec] = []
+        if kind == "structure" and not self.form.frame_in_form:
+            specs.extend(FRAME)
+        specs.extend(self.form.params)
+        for e in self.effects:
+            specs.extend(e.params)
+        return tuple(specs)
+
+    def param_names(self, kind: str) -> tuple[str, ...]:
+        return tuple(s.name for s in self.param_specs(kind))
+
+    def free_names(self, kind: str) -> tuple[str, ...]:
+        """Names of the estimated parameters (all but the form's fixed ones)."""
+        return tuple(n for n in self.param_names(kind) if n not in self.form.fixed)
+
+    def free_specs(self, kind: str) -> tuple[ParamSpec, ...]:
+        return tuple(s for s in self.param_specs(kind) if s.name not in self.form.fixed)
+
+    def theta(self, kind: str, values: dict[str, float] | None = None, *, defaults: bool = True) -> np.ndarray:
+        """Full parameter vector (SI) from ``values``; unknown names are an error.
+
+        Missing names take the spec default when ``defaults`` is True, else
+        raise listing what is missing.
+        """
+        values = dict(values or {})
+        names = self.param_names(kind)
+        unknown = [n for n in values if n not in names]
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown} for {self.name} ({kind} test); valid: {', '.join(names)}")
+        out = []
+        missing = []
+        for spec in self.param_specs(kind):
+            if spec.name in values:
+                v = float(values[spec.name])
+                if spec.positive and not v > 0:
+                    raise ValueError(f"parameter '{spec.name}' of {self.name} must be positive, got {v}")
+                out.append(v)
+            elif defaults:
+                out.append(spec.default)
+            else:
+                missing.append(spec.name)
+        if missing:
+            raise ValueError(f"{self.name}: missing parameter(s) {', '.join(missing)}")
+        return np.array(out, float)
+
+    def free_index(self, kind: str) -> np.ndarray:
+        """Indices of the free parameters within the full vector."""
+        names = self.param_names(kind)
+        return np.array([i for i, n in enumerate(names) if n not in self.form.fixed], dtype=np.int64)
+
+    def coordinates(
+        self,
+        kind: str,
+        scales: Scales | None = None,
+        ranges: dict[str, tuple[float, float]] | None = None,
+    ) -> Coordinates:
+        """Estimation coordinates of the free parameters (thesis 3-37/3-38).
+
+        Plausible ranges come from the record ``scales`` unless overridden by
+        ``ranges`` (name → (lo, hi) in SI).
+        """
+        specs = self.free_specs(kind)
+        ranges = dict(ranges or {})
+        unknown = [n for n in ranges if n not in [s.name for s in specs]]
+        if unknown:
+            raise ValueError(f"prior range given for unknown parameter(s) {unknown} of {self.name}")
+        full = {s.name: ranges.get(s.name, s.plausible(scales)) for s in specs}
+        return Coordinates.build(specs, full)
+
+    # --- states and kernel layout -----------------------------------------------
+    def state_names(self, kind: str) -> tuple[str, ...]:
+        _check_kind(kind)
+        names: list[str] = ["x", "xdot"] if kind == "structure" else []
+        names.extend(self.form.states)
+        for e in self.effects:
+            names.extend(e.states)
+        return tuple(names)
+
+    def layout(self, kind: str) -> np.ndarray:
+        """The int64 layout array the compiled kernel reads (see kernel.L_*)."""
+        k = _check_kind(kind)
+        lay = np.full(kernel.LAYOUT_SIZE, -1, dtype=np.int64)
+        lay[kernel.L_FORM] = self.form.code
+        lay[kernel.L_KIND] = k
+        names = self.param_names(kind)
+        states = self.state_names(kind)
+        if kind == "structure" and not self.form.frame_in_form:
+            lay[kernel.L_PFRAME] = 0
+            lay[kernel.L_PFORM] = len(FRAME)
+        else:
+            lay[kernel.L_PFORM] = 0
+        lay[kernel.L_SFORM] = 2 if kind == "structure" else 0
+        lay[kernel.L_NS] = len(states)
+        lay[kernel.L_NP] = len(names)
+        slot = {
+            "force_offset": kernel.L_F0,
+            "voltage_dependence": kernel.L_VD,
+            "stiffness_drift": kernel.L_DRIFT,
+            "asymmetry": kernel.L_ASYM,
+            "small_amplitude_regime": kernel.L_SA,
+            "low_velocity_rolloff": kernel.L_LVR,
+            "cubic_stiffness": kernel.L_K3,
+        }
+        for e in self.effects:
+            if e.name in slot:
+                lay[slot[e.name]] = names.index(e.params[0].name)
+        if self.effect("voltage_dependence"):
+            lay[kernel.L_SU] = states.index("u")
+        if self.effect("small_amplitude_regime"):
+            lay[kernel.L_SE] = states.index("envelope")
+        return lay
+
+    def constants(self, mass: float | None = None, *, c_acc: float = 1.0, n_max: int = 400) -> np.ndarray:
+        """The float64 constants array the kernel reads (mass, envelope time, step control)."""
+        cst = np.zeros(kernel.CONST_SIZE)
+        cst[kernel.K_MASS] = float(mass) if mass else 1.0
+        sa = self.effect("small_amplitude_regime")
+        cst[kernel.K_TENV] = float(sa.options["t_env"]) if sa else 1.0
+        cst[kernel.K_CACC] = c_acc
+        cst[kernel.K_NMAX] = n_max
+        return cst
+
+    def delay_channel(self, kind: str) -> str | None:
+        """The channel ``sensor_delay`` lags (None without that effect)."""
+        e = self.effect("sensor_delay")
+        if e is None:
+            return None
+        return e.options.get("channel") or ("acceleration" if kind == "structure" else "force")
+
+
+def get_model(name: str) -> Model:
+    """Parse ``FORM[+EFFECT...]`` (e.g. ``"spencer+force_offset+sensor_delay"``).
+
+    ``+none`` is accepted and ignored. Unknown names raise a ValueError that
+    lists the valid ones.
+    """
+    if isinstance(name, Model):
+        return name
+    parts = [p.strip() for p in str(name).split("+") if p.strip()]
+    if not parts or parts[0] not in FORMS:
+        head = parts[0] if parts else ""
+        raise ValueError(f"unknown model form '{head}'; valid: {', '.join(FORMS)}")
+    model = Model(FORMS[parts[0]])
+    for p in parts[1:]:
+        if p == NONE:
+            continue
+        if p not in EFFECTS:
+            raise ValueError(f"unknown effect '{p}'; valid: {', '.join(EFFECTS)}")
+        model = model + EFFECTS[p]
+    return model

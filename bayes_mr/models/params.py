@@ -1,0 +1,178 @@
+"""Parameter specifications, record scales and the thesis's log-scaled coordinates.
+
+Every parameter of every model is described by a frozen :class:`ParamSpec`:
+its name (the thesis's symbol), unit, sign constraint, a published or thesis
+default value, and a *plausible range* expressed relative to the scales of the
+record being fitted (:class:`Scales`). Expressing priors relative to the
+record is what lets one package meet a 25 N laboratory damper and a 2 kN
+prototype without retuning: a Coulomb force is "between 0.1 % and 100 % of
+the record's force amplitude", not "between 1 and 100 N".
+
+Estimation coordinates (thesis eqs. 3-37/3-38): a positive parameter θ is
+carried as φ = ln(s·θ), where the power of ten ``s`` puts the lower end of its
+plausible range in [1, 10) — so φ > 0 across the range, which the thesis's
+index of dispersion σ_j = τ·μ_j (3-42) needs. A signed parameter (a force
+offset, a drift rate) is carried linearly, φ = s·θ.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Characteristic magnitudes of a record, used to place default priors.
+
+    Attributes
+    ----------
+    force : float
+        Force amplitude [N] (device: robust peak of the force about its median;
+        structure: storey mass × robust peak absolute acceleration).
+    displacement : float
+        Displacement amplitude [m] (robust peak).
+    velocity : float
+        Velocity amplitude [m/s] (robust peak).
+    duration : float
+        Record length [s].
+    """
+
+    force: float
+    displacement: float
+    velocity: float
+    duration: float = 1.0
+
+    def reference(self, dims: tuple[int, int, int, int]) -> float:
+        """Reference magnitude F^a · X^b · V^c · T^d for exponents ``dims``."""
+        a, b, c, d = dims
+        return self.force**a * self.displacement**b * self.velocity**c * self.duration**d
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One model parameter.
+
+    Attributes
+    ----------
+    name : str
+        Identifier used on the command line and in results (thesis symbol).
+    unit : str
+        SI unit.
+    description : str
+        One line for ``--help`` and reports.
+    default : float
+        Thesis or published value (used by ``simulate`` when not given).
+    dims : tuple of int
+        Exponents (force, displacement, velocity, duration) of the record
+        scale the plausible range is relative to; zeros for an absolute range.
+    span : tuple of float
+        Plausible range as multiples of the reference magnitude.
+    positive : bool
+        Positive parameters are estimated on a log scale; others linearly.
+    """
+
+    name: str
+    unit: str
+    description: str
+    default: float
+    dims: tuple[int, int, int, int] = (0, 0, 0, 0)
+    span: tuple[float, float] = (0.1, 10.0)
+    positive: bool = True
+
+    def plausible(self, scales: Scales | None) -> tuple[float, float]:
+        """Plausible range [lo, hi] in SI units for a record with ``scales``.
+
+        For a signed parameter the range is symmetric, ±hi·reference.
+        Without scales the range is placed around :attr:`default`.
+        """
+        if scales is None:
+            ref = abs(self.default) if self.default != 0 else 1.0
+            lo, hi = self.span
+            if self.positive:
+                mid = math.sqrt(lo * hi)
+                return ref * lo / mid, ref * hi / mid
+            return -ref * hi, ref * hi
+        ref = scales.reference(self.dims)
+        lo, hi = self.span
+        if self.positive:
+            return lo * ref, hi * ref
+        return -hi * ref, hi * ref
+
+
+@dataclass(frozen=True)
+class Coordinates:
+    """Map between natural parameters θ (SI) and estimation coordinates φ.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Free parameter names, in order.
+    scale : ndarray, shape (p,)
+        The thesis's power-of-ten factors s_j.
+    log : ndarray of bool, shape (p,)
+        True where φ_j = ln(s_j θ_j), False where φ_j = s_j θ_j.
+    lower, upper : ndarray, shape (p,)
+        Plausible range of θ [SI] (used for LHS priors and sanity bounds).
+    """
+
+    names: tuple[str, ...]
+    scale: np.ndarray
+    log: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    units: tuple[str, ...] = field(default=())
+
+    @classmethod
+    def build(cls, specs: tuple[ParamSpec, ...], ranges: dict[str, tuple[float, float]]) -> "Coordinates":
+        """Coordinates for ``specs`` with plausible ``ranges`` (name → (lo, hi))."""
+        scale, log, lower, upper = [], [], [], []
+        for spec in specs:
+            lo, hi = ranges[spec.name]
+            if spec.positive:
+                if not (0 < lo < hi):
+                    raise ValueError(f"parameter '{spec.name}': range must satisfy 0 < lo < hi, got {lo}, {hi}")
+                scale.append(10.0 ** (-math.floor(math.log10(lo))))
+            else:
+                if not lo < hi:
+                    raise ValueError(f"parameter '{spec.name}': range must satisfy lo < hi, got {lo}, {hi}")
+                scale.append(10.0 ** (-math.floor(math.log10(max(abs(lo), abs(hi))))))
+            log.append(spec.positive)
+            lower.append(lo)
+            upper.append(hi)
+        return cls(
+            names=tuple(s.name for s in specs),
+            scale=np.array(scale, float),
+            log=np.array(log, bool),
+            lower=np.array(lower, float),
+            upper=np.array(upper, float),
+            units=tuple(s.unit for s in specs),
+        )
+
+    def to_phi(self, theta: np.ndarray) -> np.ndarray:
+        """θ (..., p) in SI → φ (..., p). Non-positive θ of a log parameter gives NaN."""
+        theta = np.asarray(theta, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logged = np.log(self.scale * np.where(theta > 0, theta, np.nan))
+        return np.where(self.log, logged, self.scale * theta)
+
+    def to_theta(self, phi: np.ndarray) -> np.ndarray:
+        """φ (..., p) → θ (..., p) in SI."""
+        phi = np.asarray(phi, float)
+        with np.errstate(over="ignore"):
+            return np.where(self.log, np.exp(phi), phi) / self.scale
+
+    def jacobian_log_det(self, phi: np.ndarray) -> np.ndarray:
+        """ln |dθ/dφ| (for densities moved between coordinates)."""
+        phi = np.asarray(phi, float)
+        return np.sum(np.where(self.log, phi, 0.0) - np.log(self.scale), axis=-1)
+
+    @property
+    def phi_lower(self) -> np.ndarray:
+        return self.to_phi(self.lower)
+
+    @property
+    def phi_upper(self) -> np.ndarray:
+        return self.to_phi(self.upper)
