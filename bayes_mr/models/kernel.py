@@ -24,7 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from .._jit import driver, hot
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
@@ -58,7 +60,7 @@ K_NMAX = 3  # most sub-steps per sample
 CONST_SIZE = 4
 
 
-@njit(cache=True, inline="always")
+@hot(inline="always")
 def _sgn(v):
     if v > 0.0:
         return 1.0
@@ -67,40 +69,26 @@ def _sgn(v):
     return 0.0
 
 
-@njit(cache=True, inline="always")
-def _static_coef(form, p, o):
-    """Coefficient multiplying the hysteretic state in the force (k_z, F_d, β, k)."""
+@hot(inline="always")
+def _zdot(form, w, z, q1, q2, q3):
+    """Hysteretic state rate of the four single-state forms driven by velocity w.
+
+    Scalars only: passing arrays into helpers makes numba reference-count them,
+    which costs more than the physics here. (q1, q2, q3) are
+    NBW: (ρ, n, σ); Dahl: (σ, –, –); LuGre: (α, –, –); Bouc–Wen: (β₁, γ, n).
+    """
     if form == NBW:
-        return p[o + 2]
+        zn = math.pow(abs(z), q2)
+        return q1 * (w - q3 * abs(w) * _sgn(z) * zn + (q3 - 1.0) * w * zn)
     if form == DAHL:
-        return p[o + 2]
+        return q1 * w * (1.0 - z * _sgn(w))
     if form == LUGRE:
-        return p[o + 2]
-    return p[o + 1]  # classic Bouc–Wen: k r
+        return w - q1 * abs(w) * z
+    rn = math.pow(abs(z), q3)
+    return w - q1 * abs(w) * _sgn(z) * rn - q2 * w * rn
 
 
-@njit(cache=True, inline="always")
-def _zdot(form, p, o, w, z):
-    """Hysteretic state rate of the four single-state forms driven by velocity w."""
-    if form == NBW:
-        rho = p[o + 3]
-        n = p[o + 4]
-        sig = p[o + 5]
-        zn = math.pow(abs(z), n)
-        return rho * (w - sig * abs(w) * _sgn(z) * zn + (sig - 1.0) * w * zn)
-    if form == DAHL:
-        return p[o + 3] * w * (1.0 - z * _sgn(w))
-    if form == LUGRE:
-        return w - p[o + 4] * abs(w) * z
-    # classic Bouc–Wen (3-32)
-    beta1 = p[o + 2]
-    gam = p[o + 3]
-    n = p[o + 4]
-    rn = math.pow(abs(z), n)
-    return w - beta1 * abs(w) * _sgn(z) * rn - gam * w * rn
-
-
-@njit(cache=True)
+@hot
 def deriv(lay, cst, p, t, a, s, ds):
     """Evaluate ṡ = f(s, a(t); p) into ``ds``.
 
@@ -193,12 +181,20 @@ def deriv(lay, cst, p, t, a, s, ds):
         c = p[o]
         k = p[o + 1]
         z = s[i]
-        f_s = m_s * _static_coef(form, p, o) * z * (1.0 + asym * _sgn(z))
+        if form == NBW:
+            coef, q1, q2, q3 = p[o + 2], p[o + 3], p[o + 4], p[o + 5]
+        elif form == DAHL:
+            coef, q1, q2, q3 = p[o + 2], p[o + 3], 0.0, 0.0
+        elif form == LUGRE:
+            coef, q1, q2, q3 = p[o + 2], p[o + 4], 0.0, 0.0
+        else:
+            coef, q1, q2, q3 = p[o + 1], p[o + 2], p[o + 3], p[o + 4]
+        f_s = m_s * coef * z * (1.0 + asym * _sgn(z))
         w = xd
         if lay[L_LVR] >= 0:
             # series dashpot c_s: the hysteretic element moves at ẋ − F/c_s
             w = xd - f_s / p[lay[L_LVR]]
-        zd = _zdot(form, p, o, w, z)
+        zd = _zdot(form, w, z, q1, q2, q3)
         ds[i] = zd
         f_d = f_s
         if form == LUGRE:
@@ -218,7 +214,7 @@ def deriv(lay, cst, p, t, a, s, ds):
     return f_r, f_d
 
 
-@njit(cache=True)
+@hot
 def rate(lay, cst, p, t, s, vmax):
     """Upper estimate of the fastest local rate |λ| [1/s] of the dynamics.
 
@@ -274,7 +270,7 @@ def rate(lay, cst, p, t, s, vmax):
         coupling = alpha * A
     else:
         z = abs(s[i])
-        coef = _static_coef(form, p, o) * m_s
+        coef = (p[o + 1] if form == BW else p[o + 2]) * m_s
         damp = p[o]
         stiff = p[o + 1]
         if form == DAHL:
@@ -317,7 +313,7 @@ def rate(lay, cst, p, t, s, vmax):
     return lam
 
 
-@njit(cache=True)
+@hot
 def substeps(lay, cst, lam, h):
     """Number of RK4 sub-steps for a sample interval h with local rate λ."""
     n = int(math.ceil(h * lam / cst[K_CACC]))
@@ -329,13 +325,7 @@ def substeps(lay, cst, lam, h):
     return n
 
 
-@njit(cache=True, inline="always")
-def _interp(a0, a1, f, out):
-    for j in range(3):
-        out[j] = a0[j] + f * (a1[j] - a0[j])
-
-
-@njit(cache=True)
+@hot
 def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
     """Integrate ``s`` in place over one sample interval [t, t+h] with RK4.
 
@@ -352,16 +342,22 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
     for j in range(n_sub):
         tj = t + j * hs
         if j > 0:
-            _interp(a0, a1, j / n_sub, am)
+            f = j / n_sub
+            for q in range(3):
+                am[q] = a0[q] + f * (a1[q] - a0[q])
             deriv(lay, cst, p, tj, am, s, k1)
-        _interp(a0, a1, (j + 0.5) / n_sub, am)
+        f = (j + 0.5) / n_sub
+        for q in range(3):
+            am[q] = a0[q] + f * (a1[q] - a0[q])
         for q in range(ns):
             tmp[q] = s[q] + 0.5 * hs * k1[q]
         deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k2)
         for q in range(ns):
             tmp[q] = s[q] + 0.5 * hs * k2[q]
         deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k3)
-        _interp(a0, a1, (j + 1.0) / n_sub, am)
+        f = (j + 1.0) / n_sub
+        for q in range(3):
+            am[q] = a0[q] + f * (a1[q] - a0[q])
         for q in range(ns):
             tmp[q] = s[q] + hs * k3[q]
         deriv(lay, cst, p, tj + hs, am, tmp, k4)
@@ -375,14 +371,14 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
             s[ie] = xa if xa > decayed else decayed
 
 
-@njit(cache=True, inline="always")
+@hot(inline="always")
 def _vmax(lay, cst, s, k1, a0, a1, h):
     if lay[L_KIND] == STRUCT:
         return abs(s[1]) + abs(k1[1]) * h
     return max(abs(a0[1]), abs(a1[1]))
 
 
-@njit(cache=True, inline="always")
+@hot(inline="always")
 def _write_out(lay, cst, s, f_r, f_d, out):
     if lay[L_KIND] == STRUCT:
         out[0] = s[0]
@@ -394,7 +390,34 @@ def _write_out(lay, cst, s, f_r, f_d, out):
         out[1] = f_d
 
 
-@njit(cache=True)
+@hot
+def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work):
+    ns = lay[L_NS]
+    N = inputs.shape[0]
+    for q in range(ns):
+        s[q] = 0.0
+    for k in range(N):
+        t = k * h
+        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
+        _write_out(lay, cst, s, f_r, f_d, out[k])
+        if not math.isfinite(f_r):
+            for kk in range(k, N):
+                for j in range(out.shape[1]):
+                    out[kk, j] = np.nan
+            return k
+        if k == N - 1:
+            break
+        if use_schedule:
+            n_sub = schedule[k]
+        else:
+            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
+            n_sub = substeps(lay, cst, lam, h)
+            schedule[k] = n_sub
+        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
+    return -1
+
+
+@driver
 def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
     """Simulate one parameter set from rest over all samples.
 
@@ -413,30 +436,13 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
         Sample index where the state became non-finite, or -1.
     """
     ns = lay[L_NS]
-    N = inputs.shape[0]
     s = np.zeros(ns)
     k1 = np.zeros(ns)
     work = np.zeros((5, max(ns, 3)))
-    for k in range(N):
-        t = k * h
-        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
-        _write_out(lay, cst, s, f_r, f_d, out[k])
-        if not math.isfinite(f_r):
-            out[k:, :] = np.nan
-            return k
-        if k == N - 1:
-            break
-        if use_schedule:
-            n_sub = schedule[k]
-        else:
-            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
-            n_sub = substeps(lay, cst, lam, h)
-            schedule[k] = n_sub
-        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
-    return -1
+    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
 
 
-@njit(cache=True, parallel=True)
+@driver(parallel=True)
 def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed):
     """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
 

@@ -146,6 +146,39 @@ class Model:
             names.extend(e.states)
         return tuple(names)
 
+    def state_scales(self, kind: str, theta: np.ndarray, scales: Scales) -> np.ndarray:
+        """Typical magnitude of each state (for filter initial and process noise).
+
+        x and the amplitude envelope scale with the record's displacement, ẋ
+        with its velocity, filtered voltages with 1 V, and hysteretic states
+        with their saturation value (1 for normalized forms, 1/α for LuGre,
+        (β₁+γ)^(−1/n) for Bouc–Wen, (A/(β+γ))^(1/n) and X for Spencer's z, y).
+        """
+        q = dict(zip(self.param_names(kind), np.asarray(theta, float)))
+        form = self.form.name
+        hyst = {
+            "normalized-bouc-wen": {"z": 1.0},
+            "dahl": {"z": 1.0},
+            "lugre": {"z": 1.0 / q.get("alpha", 1.0)},
+            "bouc-wen": {"r": (q.get("beta1", 1.0) + abs(q.get("gamma", 0.0))) ** (-1.0 / q.get("n", 1.0))},
+            "spencer": {
+                "y": scales.displacement,
+                "z": (q.get("A", 1.0) / (q.get("gamma", 1.0) + q.get("beta", 1.0))) ** (1.0 / q.get("n", 1.0)),
+                "u": 1.0,
+            },
+        }[form]
+        out = []
+        for name in self.state_names(kind):
+            if name in ("x", "envelope"):
+                out.append(scales.displacement)
+            elif name == "xdot":
+                out.append(scales.velocity)
+            elif name in hyst:
+                out.append(hyst[name])
+            else:  # filtered voltage of voltage_dependence
+                out.append(1.0)
+        return np.array(out, float)
+
     def layout(self, kind: str) -> np.ndarray:
         """The int64 layout array the compiled kernel reads (see kernel.L_*)."""
         k = _check_kind(kind)
