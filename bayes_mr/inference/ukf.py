@@ -1,0 +1,316 @@
+"""Augmented-state UKF: one filter run, and the thesis's 100-prior training.
+
+The compiled filter is :mod:`bayes_mr.inference.ukf_kernel`; this module
+sets it up from a model and a record (coordinates, noise, priors), runs it
+for many priors at once, and returns labelled results.
+
+Training (thesis §3.6.1): priors are 10 Latin-hypercube samples of the
+parameter means in their plausible ranges × 10 indices of dispersion
+τ ∈ {0.1, 1, 10, 25, 50, 75, 100, 200, 300, 600} %, with σ_j = τ·μ_j on the
+log-scaled coordinate μ_j = ln(s_j θ_j) (3-42). A run that fails numerically
+is recorded with its reason and step and left out; it never stops the study.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+from scipy.stats import qmc
+
+from ..models import Model, Scales, get_model
+from ..models.params import Coordinates
+from ..simulate import Inputs
+from . import ukf_kernel as K
+from .sigma import MerweScaled
+
+#: Indices of dispersion of thesis eq. 3-43 (as fractions).
+TAUS = (0.001, 0.01, 0.1, 0.25, 0.5, 0.75, 1.0, 2.0, 3.0, 6.0)
+
+
+@dataclass(frozen=True)
+class UKFSettings:
+    """Filter settings.
+
+    Attributes
+    ----------
+    points : MerweScaled
+        Sigma-point scheme (``MerweScaled.thesis()`` for the thesis's).
+    param_walk : float
+        Random-walk intensity of φ [log-units/√s]: Q_φ = param_walk²·h. A
+        small walk keeps the filter able to correct early mistakes.
+    state_walk : float
+        Process noise on hysteretic states, as a fraction of each state's
+        scale per √s.
+    box_decades : float
+        The mean of φ is kept within the plausible range widened by this many
+        decades on each side (log parameters; signed ones by this factor).
+    c_acc, n_max : float, int
+        Sub-step control of the model integration (see ``simulate``).
+    history_points : int
+        Parameter histories are kept at about this many time points.
+    """
+
+    points: MerweScaled = field(default_factory=MerweScaled)
+    param_walk: float = 1e-3
+    state_walk: float = 1e-3
+    box_decades: float = 1.0
+    c_acc: float = 1.0
+    n_max: int = 400
+    history_points: int = 2000
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on φ (the log-scaled free parameters).
+
+    Attributes
+    ----------
+    mean, sd : ndarray, shape (p,)
+        Mean and standard deviation of φ.
+    lhs, tau : int, float
+        Latin-hypercube sample index and index of dispersion (labels).
+    """
+
+    mean: np.ndarray
+    sd: np.ndarray
+    lhs: int = -1
+    tau: float = float("nan")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything the compiled filter needs about (model, record)."""
+
+    model: Model
+    kind: str
+    inputs: Inputs
+    yobs: np.ndarray
+    valid: np.ndarray
+    coords: Coordinates
+    template: np.ndarray
+    free_idx: np.ndarray
+    R: np.ndarray
+    q_states: np.ndarray  # per-step process variance of each state
+    p0_states: np.ndarray  # initial variance of each state
+    scales: Scales
+
+
+def record_scales(record: xr.Dataset) -> Scales:
+    """Force, displacement and velocity amplitudes of a record (robust peaks)."""
+    valid = record["valid"].values if "valid" in record else np.ones(record.sizes["time"], bool)
+
+    def peak(values):
+        v = np.asarray(values)[valid]
+        return float(np.percentile(np.abs(v - np.median(v)), 99))
+
+    x = peak(record["displacement"].values)
+    if record.attrs["kind"] == "structure":
+        f = float(record.attrs["mass"]) * peak(record["acceleration"].values)
+        v = peak(np.gradient(record["displacement"].values, record.attrs["dt"]))
+    else:
+        f = peak(record["force"].values)
+        v = peak(record["velocity"].values) if "velocity" in record else peak(
+            np.gradient(record["displacement"].values, record.attrs["dt"]))
+    duration = float(record.attrs["dt"]) * record.sizes["time"]
+    for name, value in (("force", f), ("displacement", x), ("velocity", v)):
+        if not value > 0:
+            raise ValueError(f"{record.attrs.get('source', 'record')}: {name} amplitude is zero — nothing to identify")
+    return Scales(force=f, displacement=x, velocity=v, duration=duration)
+
+
+def measurement_sd(record: xr.Dataset, channels: tuple[str, ...]) -> np.ndarray:
+    """Noise standard deviation of each measured channel.
+
+    Taken from the record's ``noise_sd_<channel>`` attribute (simulated
+    records, or a measured record after ``bayes_mr.data.noise``), else
+    estimated from the record's high-frequency content.
+    """
+    out = []
+    missing = [c for c in channels if f"noise_sd_{c}" not in record.attrs]
+    floor = {}
+    if missing:
+        from ..data.noise import noise_floor
+
+        floor = noise_floor(record, channels=missing)
+    for c in channels:
+        sd = record.attrs.get(f"noise_sd_{c}", floor.get(c))
+        if sd is None or not np.isfinite(sd) or sd <= 0:
+            sd = 1e-3 * float(np.std(record[c].values))
+        out.append(float(sd))
+    return np.array(out)
+
+
+def make_problem(
+    model: Model | str,
+    record: xr.Dataset,
+    *,
+    settings: UKFSettings = UKFSettings(),
+    ranges: dict[str, tuple[float, float]] | None = None,
+    fixed: dict[str, float] | None = None,
+    noise_sd: dict[str, float] | None = None,
+) -> Problem:
+    """Prepare (model, record) for filtering.
+
+    Parameters
+    ----------
+    ranges : dict, optional
+        Plausible ranges (SI) overriding the record-scaled defaults.
+    fixed : dict, optional
+        Parameters held fixed (besides the form's redundant ones), name → value.
+    noise_sd : dict, optional
+        Measurement noise SD per measured channel, overriding the record's.
+    """
+    model = get_model(model)
+    kind = record.attrs["kind"]
+    if model.effect("sensor_delay"):
+        raise ValueError(
+            "sensor_delay delays a measured channel after the dynamics; the UKF engine filters states "
+            "sample by sample and cannot estimate it — use --engine lsq or mcmc"
+        )
+    inputs = Inputs.from_record(record)
+    channels = ("displacement", "acceleration") if kind == "structure" else ("force",)
+    yobs = np.column_stack([record[c].values for c in channels])
+    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(inputs.n, bool)
+    scales = record_scales(record)
+    fixed = dict(fixed or {})
+    template = model.theta(kind, fixed)
+    names = model.param_names(kind)
+    free = [i for i in model.free_index(kind) if names[i] not in fixed]
+    free_specs = [s for s in model.free_specs(kind) if s.name not in fixed]
+    all_ranges = {s.name: s.plausible(scales) for s in free_specs}
+    for name, rng in (ranges or {}).items():
+        if name not in all_ranges:
+            raise ValueError(f"prior range for '{name}', which is not a free parameter of {model.name}")
+        all_ranges[name] = tuple(rng)
+    coords = Coordinates.build(tuple(free_specs), all_ranges)
+    sd = measurement_sd(record, channels)
+    if noise_sd:
+        sd = np.array([noise_sd.get(c, s) for c, s in zip(channels, sd)])
+    R = np.diag(sd**2)
+    h = inputs.dt
+    mid = coords.to_theta(0.5 * (coords.phi_lower + coords.phi_upper))
+    theta_mid = template.copy()
+    theta_mid[free] = mid
+    sscale = model.state_scales(kind, theta_mid, scales)
+    q = (settings.state_walk * sscale) ** 2 * h
+    p0 = (1e-3 * sscale) ** 2
+    if kind == "structure":
+        # the ground acceleration is measured with noise: it drives x, ẋ as process noise
+        sd_ag = record.attrs.get("noise_sd_ground_acceleration")
+        if sd_ag is None:
+            from ..data.noise import noise_floor
+
+            sd_ag = noise_floor(record, channels=("ground_acceleration",)).get("ground_acceleration")
+        sd_ag = float(sd_ag) if sd_ag else 1e-3 * float(np.std(record["ground_acceleration"].values))
+        q[0] = (sd_ag * h * h / 2) ** 2
+        q[1] = (sd_ag * h) ** 2
+    return Problem(model, kind, inputs, yobs, valid, coords, template, np.array(free, np.int64), R, q, p0, scales)
+
+
+def lhs_priors(coords: Coordinates, n_lhs: int = 10, taus=TAUS, *, seed: int | np.random.Generator = 0) -> list[Prior]:
+    """The thesis's priors: ``n_lhs`` Latin-hypercube means × the indices of dispersion.
+
+    Means are Latin-hypercube samples of φ uniform over the plausible range
+    (log-uniform in θ for positive parameters); σ_j = τ·|μ_j| (3-42).
+    """
+    rng = np.random.default_rng(seed)
+    sampler = qmc.LatinHypercube(d=len(coords.names), seed=rng)
+    u = sampler.random(n_lhs)
+    lo, hi = coords.phi_lower, coords.phi_upper
+    means = lo + u * (hi - lo)
+    priors = []
+    for i, mu in enumerate(means):
+        for tau in taus:
+            sd = np.maximum(tau * np.abs(mu), 1e-6)
+            priors.append(Prior(mu, sd, lhs=i, tau=float(tau)))
+    return priors
+
+
+def _kernel_args(problem: Problem, settings: UKFSettings):
+    model, kind = problem.model, problem.kind
+    coords = problem.coords
+    pts = settings.points
+    L = len(problem.p0_states) + len(coords.names)
+    w0m, w0c, wi = pts.weights(L)
+    margin = settings.box_decades * math.log(10.0)
+    lo, hi = coords.phi_lower, coords.phi_upper
+    width = hi - lo
+    phi_lo = np.where(coords.log, lo - margin, lo - settings.box_decades * width)
+    phi_hi = np.where(coords.log, hi + margin, hi + settings.box_decades * width)
+    lay = model.layout(kind)
+    cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max)
+    return dict(
+        lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.log,
+        scale=coords.scale, phi_lo=phi_lo, phi_hi=phi_hi, h=problem.inputs.dt,
+        inputs=problem.inputs.rows, yobs=np.ascontiguousarray(problem.yobs), valid=problem.valid,
+        w0m=w0m, w0c=w0c, wi=wi, spread=pts.spread(L), ab=pts.beta - pts.alpha**2, central=pts.central,
+    )
+
+
+def _initial(problem: Problem, prior: Prior, settings: UKFSettings):
+    ns = len(problem.p0_states)
+    m0 = np.concatenate([np.zeros(ns), prior.mean])
+    P0 = np.diag(np.concatenate([problem.p0_states, prior.sd**2]))
+    Q = np.diag(np.concatenate([problem.q_states, np.full(len(prior.mean), settings.param_walk**2 * problem.inputs.dt)]))
+    return m0, P0, Q
+
+
+def run_priors(problem: Problem, priors: list[Prior], settings: UKFSettings = UKFSettings()) -> dict:
+    """Filter the record once per prior (in parallel); raw arrays.
+
+    Returns
+    -------
+    dict with ``mean`` (R, L), ``cov`` (R, L, L), ``info`` (R, INFO_SIZE),
+    ``hist_mean``/``hist_sd`` (R, H, L), ``hist_index`` (H,), ``wall_s``.
+    """
+    args = _kernel_args(problem, settings)
+    ns = len(problem.p0_states)
+    L = ns + len(problem.coords.names)
+    N = problem.inputs.n
+    stride = max(1, int(math.ceil(N / settings.history_points)))
+    H = (N - 1) // stride + 1
+    R_ = len(priors)
+    M = np.zeros((R_, L))
+    PP = np.zeros((R_, L, L))
+    Q = None
+    for r, prior in enumerate(priors):
+        M[r], PP[r], Q = _initial(problem, prior, settings)
+    HM = np.full((R_, H, L), np.nan)
+    HS = np.full((R_, H, L), np.nan)
+    INFO = np.zeros((R_, K.INFO_SIZE))
+    t0 = _time.perf_counter()
+    K.ukf_batch(
+        args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
+        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"],
+        M, PP, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
+        args["central"], stride, HM, HS, INFO,
+    )
+    wall = _time.perf_counter() - t0
+    return dict(mean=M, cov=PP, info=INFO, hist_mean=HM, hist_sd=HS,
+                hist_index=np.arange(H) * stride, wall_s=wall)
+
+
+def filter_states(problem: Problem, prior: Prior, settings: UKFSettings = UKFSettings()) -> dict:
+    """One filter run keeping the full state-mean history (for figures).
+
+    Returns ``states`` (N, L) filtered means, ``mean``/``cov`` final, ``info``.
+    """
+    args = _kernel_args(problem, settings)
+    m, P, Q = _initial(problem, prior, settings)
+    L = m.size
+    N = problem.inputs.n
+    states = np.zeros((N, L))
+    info = np.zeros(K.INFO_SIZE)
+    hm = np.zeros((1, L))
+    hs = np.zeros((1, L))
+    K.ukf_run(
+        args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
+        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"],
+        m, P, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
+        args["central"], N + 1, hm, hs, states, True, info,
+    )
+    return dict(states=states, mean=m, cov=P, info=info)

@@ -1,0 +1,401 @@
+"""Compiled augmented-state UKF (thesis 3-10..3-30), batched over priors.
+
+Augmented state X = [model states s, φ] with φ the free parameters in the
+thesis's log-scaled coordinates (3-37). The transition integrates s over one
+sample with the model's RK4 (sub-steps shared by all sigma points, so the
+transform sees the model and not the step control) and keeps φ; the
+observation is the measured channels at the new sample: [x, ẍ+ẍ_g] for a
+structure test, [F] for a device test. Noise is additive (Q, R), sigma points
+are re-used for the observation (as filterpy does), and the innovation
+log-likelihood Σ log N(y_k; ŷ_k⁻, P_yy,k) is accumulated as the UKF's
+evidence.
+
+Robustness (DESIGN.md "Numerics"): P is symmetrised every step; a failed
+Cholesky gets jitter 1e-9·tr(P)/L ×10 up to five times, then the run stops
+with a status code naming the step. φ of the mean is kept inside a box
+(the plausible range widened by a margin) so that one wild update cannot
+push exp(φ) to overflow; every such projection is counted.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._jit import driver, hot
+
+from ..models.kernel import L_KIND, L_NS, STRUCT, K_MASS, advance, deriv, rate, substeps
+
+# status codes of a run
+OK = 0
+CHOL_FAILED = 1
+NON_FINITE = 2
+INNOVATION_NOT_PD = 3
+NAMES = {
+    OK: "ok",
+    CHOL_FAILED: "state covariance not positive definite after jitter",
+    NON_FINITE: "state or covariance became non-finite",
+    INNOVATION_NOT_PD: "innovation covariance not positive definite",
+}
+# info slots
+I_STATUS, I_STEP, I_LOGLIK, I_JITTER, I_NSUB, I_CLIP, I_NUPD = range(7)
+INFO_SIZE = 7
+
+
+@hot
+def cholesky(A, Lo, n):
+    """Lower Cholesky factor of A[:n,:n] into Lo; False if not positive definite."""
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= Lo[j, k] * Lo[j, k]
+        if not (s > 0.0) or not math.isfinite(s):
+            return False
+        d = math.sqrt(s)
+        Lo[j, j] = d
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= Lo[i, k] * Lo[j, k]
+            Lo[i, j] = s / d
+        for i in range(j):
+            Lo[i, j] = 0.0
+    return True
+
+
+@hot
+def observe(lay, cst, th, t, a, s, ds, y):
+    """Measured channels predicted from state s: structure [x, −f_r/m], device [f_r]."""
+    f_r, f_d = deriv(lay, cst, th, t, a, s, ds)
+    if lay[L_KIND] == STRUCT:
+        y[0] = s[0]
+        y[1] = -f_r / cst[K_MASS]
+    else:
+        y[0] = f_r
+
+
+@hot
+def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
+    for q in range(tmpl.shape[0]):
+        th[q] = tmpl[q]
+    for j in range(free_idx.shape[0]):
+        v = phi[j]
+        if v < phi_lo[j]:
+            v = phi_lo[j]
+        elif v > phi_hi[j]:
+            v = phi_hi[j]
+        th[free_idx[j]] = (math.exp(v) if is_log[j] else v) / scale[j]
+
+
+@hot
+def _ukf_loop(
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
+    h, inputs, yobs, valid, m, P, Q, R,
+    w0m, w0c, wi, spread, ab, central,
+    stride, hist_m, hist_sd, states_m, store_states, info,
+    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+):
+    """The filter loop proper (no allocation; see :func:`ukf_run`)."""
+    N = inputs.shape[0]
+    ns = lay[L_NS]
+    L = m.shape[0]
+    npf = L - ns
+    ny = yobs.shape[1]
+    nsig = 2 * L + 1
+    loglik = 0.0
+    n_jitter = 0
+    n_clip = 0
+    n_upd = 0
+    max_nsub = 0
+    status = OK
+    step = -1
+    log2pi = math.log(2.0 * math.pi)
+    i_hist = 0
+    for k in range(N):
+        if store_states:
+            for q in range(L):
+                states_m[k, q] = m[q]
+        if k % stride == 0 and i_hist < hist_m.shape[0]:
+            for q in range(L):
+                hist_m[i_hist, q] = m[q]
+                hist_sd[i_hist, q] = math.sqrt(max(P[q, q], 0.0))
+            i_hist += 1
+        if k == N - 1:
+            break
+        t = k * h
+        # --- sigma points (with a bounded jitter ladder) -----------------------
+        ok = cholesky(P, S, L)
+        if not ok:
+            tr = 0.0
+            for q in range(L):
+                tr += abs(P[q, q])
+            eps = 1e-9 * tr / L
+            for attempt in range(5):
+                for q in range(L):
+                    for r in range(L):
+                        Pj[q, r] = P[q, r]
+                    Pj[q, q] += eps
+                ok = cholesky(Pj, S, L)
+                if ok:
+                    n_jitter += 1
+                    break
+                eps *= 10.0
+        if not ok:
+            status = CHOL_FAILED
+            step = k
+            break
+        for q in range(L):
+            X[0, q] = m[q]
+        for i in range(L):
+            for q in range(L):
+                X[1 + i, q] = m[q] + spread * S[q, i]
+                X[1 + L + i, q] = m[q] - spread * S[q, i]
+        # --- predict: propagate every sigma point over [t, t+h] ------------
+        lam = 0.0
+        for i in range(nsig):
+            _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
+            f_r, f_d = deriv(lay, cst, TH[i], t, inputs[k], X[i, :ns], K1[i])
+            if lay[L_KIND] == STRUCT:
+                vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
+            else:
+                vmax = max(abs(inputs[k, 1]), abs(inputs[k + 1, 1]))
+            r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax)
+            if r_i > lam:
+                lam = r_i
+        n_sub = substeps(lay, cst, lam, h)
+        if n_sub > max_nsub:
+            max_nsub = n_sub
+        finite = True
+        for i in range(nsig):
+            for q in range(ns):
+                sbuf[q] = X[i, q]
+            advance(lay, cst, TH[i], t, h, inputs[k], inputs[k + 1], sbuf, K1[i], n_sub, work)
+            for q in range(ns):
+                X[i, q] = sbuf[q]
+                if not math.isfinite(sbuf[q]):
+                    finite = False
+            observe(lay, cst, TH[i], t + h, inputs[k + 1], X[i, :ns], dsbuf, Y[i])
+            for q in range(ny):
+                if not math.isfinite(Y[i, q]):
+                    finite = False
+        if not finite:
+            status = NON_FINITE
+            step = k + 1
+            break
+        # --- unscented means and covariances -------------------------------------
+        if central:
+            for q in range(L):
+                acc = 0.0
+                for i in range(1, nsig):
+                    acc += X[i, q] - X[0, q]
+                d[q] = wi * acc
+                m[q] = X[0, q] + d[q]
+            for q in range(ny):
+                acc = 0.0
+                for i in range(1, nsig):
+                    acc += Y[i, q] - Y[0, q]
+                dy[q] = wi * acc
+                yhat[q] = Y[0, q] + dy[q]
+            for q in range(L):
+                for r in range(q + 1):
+                    acc = 0.0
+                    for i in range(1, nsig):
+                        acc += (X[i, q] - X[0, q]) * (X[i, r] - X[0, r])
+                    v = wi * acc + ab * d[q] * d[r] + Q[q, r]
+                    P[q, r] = v
+                    P[r, q] = v
+                for r in range(ny):
+                    acc = 0.0
+                    for i in range(1, nsig):
+                        acc += (X[i, q] - X[0, q]) * (Y[i, r] - Y[0, r])
+                    Pxy[q, r] = wi * acc + ab * d[q] * dy[r]
+            for q in range(ny):
+                for r in range(q + 1):
+                    acc = 0.0
+                    for i in range(1, nsig):
+                        acc += (Y[i, q] - Y[0, q]) * (Y[i, r] - Y[0, r])
+                    v = wi * acc + ab * dy[q] * dy[r] + R[q, r]
+                    Pyy[q, r] = v
+                    Pyy[r, q] = v
+        else:
+            for q in range(L):
+                acc = w0m * X[0, q]
+                for i in range(1, nsig):
+                    acc += wi * X[i, q]
+                m[q] = acc
+            for q in range(ny):
+                acc = w0m * Y[0, q]
+                for i in range(1, nsig):
+                    acc += wi * Y[i, q]
+                yhat[q] = acc
+            for q in range(L):
+                for r in range(q + 1):
+                    acc = w0c * (X[0, q] - m[q]) * (X[0, r] - m[r])
+                    for i in range(1, nsig):
+                        acc += wi * (X[i, q] - m[q]) * (X[i, r] - m[r])
+                    v = acc + Q[q, r]
+                    P[q, r] = v
+                    P[r, q] = v
+                for r in range(ny):
+                    acc = w0c * (X[0, q] - m[q]) * (Y[0, r] - yhat[r])
+                    for i in range(1, nsig):
+                        acc += wi * (X[i, q] - m[q]) * (Y[i, r] - yhat[r])
+                    Pxy[q, r] = acc
+            for q in range(ny):
+                for r in range(q + 1):
+                    acc = w0c * (Y[0, q] - yhat[q]) * (Y[0, r] - yhat[r])
+                    for i in range(1, nsig):
+                        acc += wi * (Y[i, q] - yhat[q]) * (Y[i, r] - yhat[r])
+                    v = acc + R[q, r]
+                    Pyy[q, r] = v
+                    Pyy[r, q] = v
+        # --- update with the measurement at k+1 ----------------------------------
+        if valid[k + 1]:
+            if not cholesky(Pyy, Syy, ny):
+                status = INNOVATION_NOT_PD
+                step = k + 1
+                break
+            for q in range(ny):
+                nu[q] = yobs[k + 1, q] - yhat[q]
+            # z = Syy⁻¹ ν (forward substitution)
+            logdet = 0.0
+            for q in range(ny):
+                acc = nu[q]
+                for r in range(q):
+                    acc -= Syy[q, r] * z[r]
+                z[q] = acc / Syy[q, q]
+                logdet += 2.0 * math.log(Syy[q, q])
+            maha = 0.0
+            for q in range(ny):
+                maha += z[q] * z[q]
+            loglik += -0.5 * (ny * log2pi + logdet + maha)
+            n_upd += 1
+            # K = Pxy Pyy⁻¹: solve Syy Syyᵀ Kᵀ = Pxyᵀ row by row
+            for q in range(L):
+                for r in range(ny):
+                    acc = Pxy[q, r]
+                    for c in range(r):
+                        acc -= Syy[r, c] * Kg[q, c]
+                    Kg[q, r] = acc / Syy[r, r]
+                for r in range(ny - 1, -1, -1):
+                    acc = Kg[q, r]
+                    for c in range(r + 1, ny):
+                        acc -= Syy[c, r] * Kg[q, c]
+                    Kg[q, r] = acc / Syy[r, r]
+            for q in range(L):
+                acc = 0.0
+                for r in range(ny):
+                    acc += Kg[q, r] * nu[r]
+                m[q] += acc
+            # P ← P − K Pxyᵀ, symmetrised
+            for q in range(L):
+                for r in range(q + 1):
+                    acc = 0.0
+                    for c in range(ny):
+                        acc += 0.5 * (Kg[q, c] * Pxy[r, c] + Kg[r, c] * Pxy[q, c])
+                    v = P[q, r] - acc
+                    P[q, r] = v
+                    P[r, q] = v
+        # keep the mean of φ inside its box
+        for j in range(npf):
+            q = ns + j
+            if m[q] < phi_lo[j]:
+                m[q] = phi_lo[j]
+                n_clip += 1
+            elif m[q] > phi_hi[j]:
+                m[q] = phi_hi[j]
+                n_clip += 1
+        bad = False
+        for q in range(L):
+            if not math.isfinite(m[q]) or not math.isfinite(P[q, q]):
+                bad = True
+        if bad:
+            status = NON_FINITE
+            step = k + 1
+            break
+    info[I_STATUS] = status
+    info[I_STEP] = step
+    info[I_LOGLIK] = loglik
+    info[I_JITTER] = n_jitter
+    info[I_NSUB] = max_nsub
+    info[I_CLIP] = n_clip
+    info[I_NUPD] = n_upd
+
+
+
+
+@driver
+def ukf_run(
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
+    h, inputs, yobs, valid, m, P, Q, R,
+    w0m, w0c, wi, spread, ab, central,
+    stride, hist_m, hist_sd, states_m, store_states, info,
+):
+    """Filter one record from prior (m, P); m and P are updated in place.
+
+    Parameters
+    ----------
+    lay, cst : model layout and constants (see models.kernel).
+    tmpl : (n_full,) parameter template (fixed parameters at their values).
+    free_idx, is_log, scale : free-parameter positions and coordinates.
+    phi_lo, phi_hi : box kept by the mean of φ and by sigma-point evaluation.
+    h : sample interval [s]. inputs : (N, 3). yobs : (N, ny). valid : (N,) bool.
+    m, P : (L,), (L, L) prior mean/covariance on entry, posterior on exit.
+    Q, R : (L, L), (ny, ny) additive process and measurement noise per step.
+    w0m, w0c, wi, spread, ab : sigma-point weights, √(L+λ), β − α².
+    central : sum about the central sigma point (True) or with raw weights.
+    stride : history every ``stride`` samples into hist_m, hist_sd (n_hist, L).
+    states_m : (N, L) full mean history when ``store_states``.
+    info : (INFO_SIZE,) float array written on exit.
+    """
+    ns = lay[L_NS]
+    L = m.shape[0]
+    ny = yobs.shape[1]
+    nsig = 2 * L + 1
+    nfull = tmpl.shape[0]
+    S = np.zeros((L, L))
+    Pj = np.zeros((L, L))
+    X = np.zeros((nsig, L))
+    TH = np.zeros((nsig, nfull))
+    K1 = np.zeros((nsig, ns))
+    Y = np.zeros((nsig, ny))
+    work = np.zeros((5, max(ns, 3)))
+    sbuf = np.zeros(ns)
+    dsbuf = np.zeros(ns)
+    d = np.zeros(L)
+    dy = np.zeros(ny)
+    yhat = np.zeros(ny)
+    Pyy = np.zeros((ny, ny))
+    Syy = np.zeros((ny, ny))
+    Pxy = np.zeros((L, ny))
+    Kg = np.zeros((L, ny))
+    nu = np.zeros(ny)
+    z = np.zeros(ny)
+    _ukf_loop(
+        lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
+        h, inputs, yobs, valid, m, P, Q, R,
+        w0m, w0c, wi, spread, ab, central,
+        stride, hist_m, hist_sd, states_m, store_states, info,
+        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+    )
+
+
+@driver(parallel=True)
+def ukf_batch(
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
+    h, inputs, yobs, valid, M, PP, Q, R,
+    w0m, w0c, wi, spread, ab, central,
+    stride, HM, HS, INFO,
+):
+    """Run :func:`ukf_run` for every prior (M[r], PP[r]) in parallel."""
+    n_runs = M.shape[0]
+    dummy = np.zeros((1, M.shape[1]))
+    for r in prange(n_runs):
+        ukf_run(
+            lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
+            h, inputs, yobs, valid, M[r], PP[r], Q, R,
+            w0m, w0c, wi, spread, ab, central,
+            stride, HM[r], HS[r], dummy, False, INFO[r],
+        )
