@@ -90,14 +90,110 @@ def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
 
 
 @hot
+def _sigma_points(m, P, S, Pj, X, spread, L):
+    """X ← m ± spread·chol(P) columns, with a bounded jitter ladder.
+
+    Returns 0 (no jitter), 1 (jitter was added) or -1 (not positive definite).
+    """
+    jittered = 0
+    ok = cholesky(P, S, L)
+    if not ok:
+        tr = 0.0
+        for q in range(L):
+            tr += abs(P[q, q])
+        eps = 1e-9 * tr / L
+        for attempt in range(5):
+            for q in range(L):
+                for r in range(L):
+                    Pj[q, r] = P[q, r]
+                Pj[q, q] += eps
+            ok = cholesky(Pj, S, L)
+            if ok:
+                jittered = 1
+                break
+            eps *= 10.0
+    if not ok:
+        return -1
+    for q in range(L):
+        X[0, q] = m[q]
+    for i in range(L):
+        for q in range(L):
+            X[1 + i, q] = m[q] + spread * S[q, i]
+            X[1 + L + i, q] = m[q] - spread * S[q, i]
+    return jittered
+
+
+@hot
+def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same):
+    """Unscented mean of the rows of A (and B) and their cross-covariance Pab.
+
+    ``central`` sums about the first (central) point:
+    m = A₀ + δ, P = Σ_{i≥1} W_i ΔA_i ΔB_iᵀ + (β − α²) δ_A δ_Bᵀ;
+    otherwise with the raw weights (thesis, filterpy). When ``same`` only the
+    lower triangle is computed and mirrored.
+    """
+    na = A.shape[1]
+    nb = B.shape[1]
+    if central:
+        for q in range(na):
+            acc = 0.0
+            for i in range(1, nsig):
+                acc += A[i, q] - A[0, q]
+            da[q] = wi * acc
+            ma[q] = A[0, q] + da[q]
+        for q in range(nb):
+            acc = 0.0
+            for i in range(1, nsig):
+                acc += B[i, q] - B[0, q]
+            db[q] = wi * acc
+            mb[q] = B[0, q] + db[q]
+        for q in range(na):
+            top = q + 1 if same else nb
+            for r in range(top):
+                acc = 0.0
+                for i in range(1, nsig):
+                    acc += (A[i, q] - A[0, q]) * (B[i, r] - B[0, r])
+                v = wi * acc + ab * da[q] * db[r]
+                Pab[q, r] = v
+                if same:
+                    Pab[r, q] = v
+    else:
+        for q in range(na):
+            acc = w0m * A[0, q]
+            for i in range(1, nsig):
+                acc += wi * A[i, q]
+            ma[q] = acc
+        for q in range(nb):
+            acc = w0m * B[0, q]
+            for i in range(1, nsig):
+                acc += wi * B[i, q]
+            mb[q] = acc
+        for q in range(na):
+            top = q + 1 if same else nb
+            for r in range(top):
+                acc = w0c * (A[0, q] - ma[q]) * (B[0, r] - mb[r])
+                for i in range(1, nsig):
+                    acc += wi * (A[i, q] - ma[q]) * (B[i, r] - mb[r])
+                Pab[q, r] = acc
+                if same:
+                    Pab[r, q] = acc
+
+
+@hot
 def _ukf_loop(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
     h, inputs, yobs, valid, m, P, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, hist_m, hist_sd, states_m, store_states, info,
-    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
 ):
-    """The filter loop proper (no allocation; see :func:`ukf_run`)."""
+    """The filter loop proper (no allocation; see :func:`ukf_run`).
+
+    Per sample: sigma points about (m, P); propagate the model states of each;
+    predicted moments + Q; sigma points redrawn about the prediction (so the
+    measurement sees Q, as in the exact Kalman filter — filterpy #172);
+    measurement moments + R; Kalman update; box the mean of φ.
+    """
     N = inputs.shape[0]
     ns = lay[L_NS]
     L = m.shape[0]
@@ -125,38 +221,17 @@ def _ukf_loop(
         if k == N - 1:
             break
         t = k * h
-        # --- sigma points (with a bounded jitter ladder) -----------------------
-        ok = cholesky(P, S, L)
-        if not ok:
-            tr = 0.0
-            for q in range(L):
-                tr += abs(P[q, q])
-            eps = 1e-9 * tr / L
-            for attempt in range(5):
-                for q in range(L):
-                    for r in range(L):
-                        Pj[q, r] = P[q, r]
-                    Pj[q, q] += eps
-                ok = cholesky(Pj, S, L)
-                if ok:
-                    n_jitter += 1
-                    break
-                eps *= 10.0
-        if not ok:
+        # --- predict: propagate every sigma point over [t, t+h] ------------
+        jit = _sigma_points(m, P, S, Pj, X, spread, L)
+        if jit < 0:
             status = CHOL_FAILED
             step = k
             break
-        for q in range(L):
-            X[0, q] = m[q]
-        for i in range(L):
-            for q in range(L):
-                X[1 + i, q] = m[q] + spread * S[q, i]
-                X[1 + L + i, q] = m[q] - spread * S[q, i]
-        # --- predict: propagate every sigma point over [t, t+h] ------------
+        n_jitter += jit
         lam = 0.0
         for i in range(nsig):
             _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
-            f_r, f_d = deriv(lay, cst, TH[i], t, inputs[k], X[i, :ns], K1[i])
+            deriv(lay, cst, TH[i], t, inputs[k], X[i, :ns], K1[i])
             if lay[L_KIND] == STRUCT:
                 vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
             else:
@@ -176,83 +251,37 @@ def _ukf_loop(
                 X[i, q] = sbuf[q]
                 if not math.isfinite(sbuf[q]):
                     finite = False
-            observe(lay, cst, TH[i], t + h, inputs[k + 1], X[i, :ns], dsbuf, Y[i])
-            for q in range(ny):
-                if not math.isfinite(Y[i, q]):
-                    finite = False
         if not finite:
             status = NON_FINITE
             step = k + 1
             break
-        # --- unscented means and covariances -------------------------------------
-        if central:
-            for q in range(L):
-                acc = 0.0
-                for i in range(1, nsig):
-                    acc += X[i, q] - X[0, q]
-                d[q] = wi * acc
-                m[q] = X[0, q] + d[q]
-            for q in range(ny):
-                acc = 0.0
-                for i in range(1, nsig):
-                    acc += Y[i, q] - Y[0, q]
-                dy[q] = wi * acc
-                yhat[q] = Y[0, q] + dy[q]
-            for q in range(L):
-                for r in range(q + 1):
-                    acc = 0.0
-                    for i in range(1, nsig):
-                        acc += (X[i, q] - X[0, q]) * (X[i, r] - X[0, r])
-                    v = wi * acc + ab * d[q] * d[r] + Q[q, r]
-                    P[q, r] = v
-                    P[r, q] = v
-                for r in range(ny):
-                    acc = 0.0
-                    for i in range(1, nsig):
-                        acc += (X[i, q] - X[0, q]) * (Y[i, r] - Y[0, r])
-                    Pxy[q, r] = wi * acc + ab * d[q] * dy[r]
-            for q in range(ny):
-                for r in range(q + 1):
-                    acc = 0.0
-                    for i in range(1, nsig):
-                        acc += (Y[i, q] - Y[0, q]) * (Y[i, r] - Y[0, r])
-                    v = wi * acc + ab * dy[q] * dy[r] + R[q, r]
-                    Pyy[q, r] = v
-                    Pyy[r, q] = v
-        else:
-            for q in range(L):
-                acc = w0m * X[0, q]
-                for i in range(1, nsig):
-                    acc += wi * X[i, q]
-                m[q] = acc
-            for q in range(ny):
-                acc = w0m * Y[0, q]
-                for i in range(1, nsig):
-                    acc += wi * Y[i, q]
-                yhat[q] = acc
-            for q in range(L):
-                for r in range(q + 1):
-                    acc = w0c * (X[0, q] - m[q]) * (X[0, r] - m[r])
-                    for i in range(1, nsig):
-                        acc += wi * (X[i, q] - m[q]) * (X[i, r] - m[r])
-                    v = acc + Q[q, r]
-                    P[q, r] = v
-                    P[r, q] = v
-                for r in range(ny):
-                    acc = w0c * (X[0, q] - m[q]) * (Y[0, r] - yhat[r])
-                    for i in range(1, nsig):
-                        acc += wi * (X[i, q] - m[q]) * (Y[i, r] - yhat[r])
-                    Pxy[q, r] = acc
-            for q in range(ny):
-                for r in range(q + 1):
-                    acc = w0c * (Y[0, q] - yhat[q]) * (Y[0, r] - yhat[r])
-                    for i in range(1, nsig):
-                        acc += wi * (Y[i, q] - yhat[q]) * (Y[i, r] - yhat[r])
-                    v = acc + R[q, r]
-                    Pyy[q, r] = v
-                    Pyy[r, q] = v
+        _moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True)
+        for q in range(L):
+            for r in range(L):
+                P[q, r] += Q[q, r]
         # --- update with the measurement at k+1 ----------------------------------
         if valid[k + 1]:
+            jit = _sigma_points(m, P, S, Pj, X, spread, L)
+            if jit < 0:
+                status = CHOL_FAILED
+                step = k + 1
+                break
+            n_jitter += jit
+            for i in range(nsig):
+                _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
+                observe(lay, cst, TH[i], t + h, inputs[k + 1], X[i, :ns], dsbuf, Y[i])
+                for q in range(ny):
+                    if not math.isfinite(Y[i, q]):
+                        finite = False
+            if not finite:
+                status = NON_FINITE
+                step = k + 1
+                break
+            _moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True)
+            _moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False)
+            for q in range(ny):
+                for r in range(ny):
+                    Pyy[q, r] += R[q, r]
             if not cholesky(Pyy, Syy, ny):
                 status = INNOVATION_NOT_PD
                 step = k + 1
@@ -324,8 +353,6 @@ def _ukf_loop(
     info[I_NUPD] = n_upd
 
 
-
-
 @driver
 def ukf_run(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
@@ -365,6 +392,7 @@ def ukf_run(
     sbuf = np.zeros(ns)
     dsbuf = np.zeros(ns)
     d = np.zeros(L)
+    mx = np.zeros(L)
     dy = np.zeros(ny)
     yhat = np.zeros(ny)
     Pyy = np.zeros((ny, ny))
@@ -378,7 +406,7 @@ def ukf_run(
         h, inputs, yobs, valid, m, P, Q, R,
         w0m, w0c, wi, spread, ab, central,
         stride, hist_m, hist_sd, states_m, store_states, info,
-        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
     )
 
 
@@ -399,3 +427,27 @@ def ukf_batch(
             w0m, w0c, wi, spread, ab, central,
             stride, HM[r], HS[r], dummy, False, INFO[r],
         )
+
+
+@driver
+def propagate(lay, cst, th, t, h, a0, a1, s, n_sub):
+    """One sample interval of the model for one state vector (for references).
+
+    Returns the new model state; ``s`` is not modified.
+    """
+    ns = lay[L_NS]
+    out = s.copy()
+    k1 = np.zeros(ns)
+    work = np.zeros((5, max(ns, 3)))
+    deriv(lay, cst, th, t, a0, out, k1)
+    advance(lay, cst, th, t, h, a0, a1, out, k1, n_sub, work)
+    return out
+
+
+@driver
+def measure(lay, cst, th, t, a, s, ny):
+    """The measured channels predicted from one state vector (for references)."""
+    y = np.zeros(ny)
+    ds = np.zeros(lay[L_NS])
+    observe(lay, cst, th, t, a, s, ds, y)
+    return y

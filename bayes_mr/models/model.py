@@ -151,16 +151,18 @@ class Model:
 
         x and the amplitude envelope scale with the record's displacement, ẋ
         with its velocity, filtered voltages with 1 V, and hysteretic states
-        with their saturation value (1 for normalized forms, 1/α for LuGre,
-        (β₁+γ)^(−1/n) for Bouc–Wen, (A/(β+γ))^(1/n) and X for Spencer's z, y).
+        with their saturation value (1 for normalized forms, min(1/α, X) for LuGre,
+        min((β₁+γ)^(−1/n), X) for Bouc–Wen, (A/(β+γ))^(1/n) and X for Spencer's z, y).
         """
         q = dict(zip(self.param_names(kind), np.asarray(theta, float)))
         form = self.form.name
         hyst = {
             "normalized-bouc-wen": {"z": 1.0},
             "dahl": {"z": 1.0},
-            "lugre": {"z": 1.0 / q.get("alpha", 1.0)},
-            "bouc-wen": {"r": (q.get("beta1", 1.0) + abs(q.get("gamma", 0.0))) ** (-1.0 / q.get("n", 1.0))},
+            # z of LuGre and r of Bouc–Wen move with x until they saturate
+            "lugre": {"z": min(1.0 / q.get("alpha", 1.0), scales.displacement)},
+            "bouc-wen": {"r": min((q.get("beta1", 1.0) + abs(q.get("gamma", 0.0))) ** (-1.0 / q.get("n", 1.0)),
+                                  scales.displacement)},
             "spencer": {
                 "y": scales.displacement,
                 "z": (q.get("A", 1.0) / (q.get("gamma", 1.0) + q.get("beta", 1.0))) ** (1.0 / q.get("n", 1.0)),
