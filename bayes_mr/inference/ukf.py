@@ -21,6 +21,7 @@ import numpy as np
 import xarray as xr
 from scipy.stats import qmc
 
+from ..likelihood import Parameterisation, channel_noise, record_scales
 from ..models import Model, Scales, get_model
 from ..models.params import Coordinates
 from ..simulate import Inputs
@@ -99,51 +100,6 @@ class Problem:
     scales: Scales
 
 
-def record_scales(record: xr.Dataset) -> Scales:
-    """Force, displacement and velocity amplitudes of a record (robust peaks)."""
-    valid = record["valid"].values if "valid" in record else np.ones(record.sizes["time"], bool)
-
-    def peak(values):
-        v = np.asarray(values)[valid]
-        return float(np.percentile(np.abs(v - np.median(v)), 99))
-
-    x = peak(record["displacement"].values)
-    if record.attrs["kind"] == "structure":
-        f = float(record.attrs["mass"]) * peak(record["acceleration"].values)
-        v = peak(np.gradient(record["displacement"].values, record.attrs["dt"]))
-    else:
-        f = peak(record["force"].values)
-        v = peak(record["velocity"].values) if "velocity" in record else peak(
-            np.gradient(record["displacement"].values, record.attrs["dt"]))
-    duration = float(record.attrs["dt"]) * record.sizes["time"]
-    for name, value in (("force", f), ("displacement", x), ("velocity", v)):
-        if not value > 0:
-            raise ValueError(f"{record.attrs.get('source', 'record')}: {name} amplitude is zero — nothing to identify")
-    return Scales(force=f, displacement=x, velocity=v, duration=duration)
-
-
-def measurement_sd(record: xr.Dataset, channels: tuple[str, ...]) -> np.ndarray:
-    """Noise standard deviation of each measured channel.
-
-    Taken from the record's ``noise_sd_<channel>`` attribute (simulated
-    records, or a measured record after ``bayes_mr.data.noise``), else
-    estimated from the record's high-frequency content.
-    """
-    out = []
-    missing = [c for c in channels if f"noise_sd_{c}" not in record.attrs]
-    floor = {}
-    if missing:
-        from ..data.noise import noise_floor
-
-        floor = noise_floor(record, channels=missing)
-    for c in channels:
-        sd = record.attrs.get(f"noise_sd_{c}", floor.get(c))
-        if sd is None or not np.isfinite(sd) or sd <= 0:
-            sd = 1e-3 * float(np.std(record[c].values))
-        out.append(float(sd))
-    return np.array(out)
-
-
 def make_problem(
     model: Model | str,
     record: xr.Dataset,
@@ -176,18 +132,9 @@ def make_problem(
     yobs = np.column_stack([record[c].values for c in channels])
     valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(inputs.n, bool)
     scales = record_scales(record)
-    fixed = dict(fixed or {})
-    template = model.theta(kind, fixed)
-    names = model.param_names(kind)
-    free = [i for i in model.free_index(kind) if names[i] not in fixed]
-    free_specs = [s for s in model.free_specs(kind) if s.name not in fixed]
-    all_ranges = {s.name: s.plausible(scales) for s in free_specs}
-    for name, rng in (ranges or {}).items():
-        if name not in all_ranges:
-            raise ValueError(f"prior range for '{name}', which is not a free parameter of {model.name}")
-        all_ranges[name] = tuple(rng)
-    coords = Coordinates.build(tuple(free_specs), all_ranges)
-    sd = measurement_sd(record, channels)
+    par = Parameterisation.build(model, kind, scales, ranges=ranges, fixed=fixed)
+    coords, template, free = par.coords, par.template, par.free_idx
+    sd = channel_noise(record, channels)
     if noise_sd:
         sd = np.array([noise_sd.get(c, s) for c, s in zip(channels, sd)])
     R = np.diag(sd**2)
@@ -200,15 +147,10 @@ def make_problem(
     p0 = (1e-3 * sscale) ** 2
     if kind == "structure":
         # the ground acceleration is measured with noise: it drives x, ẋ as process noise
-        sd_ag = record.attrs.get("noise_sd_ground_acceleration")
-        if sd_ag is None:
-            from ..data.noise import noise_floor
-
-            sd_ag = noise_floor(record, channels=("ground_acceleration",)).get("ground_acceleration")
-        sd_ag = float(sd_ag) if sd_ag else 1e-3 * float(np.std(record["ground_acceleration"].values))
+        sd_ag = float(channel_noise(record, ("ground_acceleration",))[0])
         q[0] = (sd_ag * h * h / 2) ** 2
         q[1] = (sd_ag * h) ** 2
-    return Problem(model, kind, inputs, yobs, valid, coords, template, np.array(free, np.int64), R, q, p0, scales)
+    return Problem(model, kind, inputs, yobs, valid, coords, template, free, R, q, p0, scales)
 
 
 def lhs_priors(coords: Coordinates, n_lhs: int = 10, taus=TAUS, *, seed: int | np.random.Generator = 0) -> list[Prior]:

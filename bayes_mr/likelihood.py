@@ -1,0 +1,289 @@
+"""One place that turns (model, record) into a log-density of θ.
+
+The output-error likelihood: the model is simulated from rest under the
+record's inputs and compared with the measured channels (structure test:
+displacement and absolute acceleration; device test: force), with
+independent Gaussian errors of standard deviation σ_c per channel, over the
+samples quality control left valid:
+
+    ln p(y | θ, σ) = Σ_c Σ_{i valid} ln N(y_{c,i}; ŷ_{c,i}(θ), σ_c²)
+
+Priors: uniform on the estimation coordinates φ over each parameter's
+plausible range (log-uniform in θ for positive parameters, thesis 3-37), and
+log-uniform σ_c on [1e-4, 1] × SD(y_c) when the noise is sampled. Both are
+proper, so the evidence ∫ p(y|θ,σ) p(θ) p(σ) dθ dσ is defined; the σ prior
+is the same for every model fitted to the same record.
+
+What it does not model: residuals of a measured record are autocorrelated
+(model error is smooth in time), so with thousands of samples the posterior
+is narrower than the model error justifies. Decimating the record
+(``decimate=``) is the simple remedy offered here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from .data.schema import OUTPUTS
+from .models import Model, Scales, get_model
+from .models.params import Coordinates
+from .simulate import Inputs, Simulation, simulate
+
+LOG_2PI = float(np.log(2 * np.pi))
+#: Sampled noise SD prior: log-uniform on these multiples of each channel's SD.
+SIGMA_SPAN = (1e-4, 1.0)
+
+
+def record_scales(record: xr.Dataset) -> Scales:
+    """Force, displacement and velocity amplitudes of a record (robust peaks)."""
+    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(record.sizes["time"], bool)
+
+    def peak(values):
+        v = np.asarray(values)[valid]
+        return float(np.percentile(np.abs(v - np.median(v)), 99))
+
+    dt = float(record.attrs["dt"])
+    x = peak(record["displacement"].values)
+    if record.attrs["kind"] == "structure":
+        f = float(record.attrs["mass"]) * peak(record["acceleration"].values)
+        v = peak(np.gradient(record["displacement"].values, dt))
+    else:
+        f = peak(record["force"].values)
+        v = peak(record["velocity"].values) if "velocity" in record else peak(
+            np.gradient(record["displacement"].values, dt))
+    duration = dt * record.sizes["time"]
+    for name, value in (("force", f), ("displacement", x), ("velocity", v)):
+        if not value > 0:
+            raise ValueError(f"{record.attrs.get('source', 'record')}: {name} amplitude is zero — nothing to identify")
+    return Scales(force=f, displacement=x, velocity=v, duration=duration)
+
+
+def channel_noise(record: xr.Dataset, channels: tuple[str, ...]) -> np.ndarray:
+    """Measurement-noise standard deviation of each channel [channel units].
+
+    From the record's ``noise_sd_<channel>`` attribute (simulated records; a
+    measured record after a noise-floor estimate), else estimated by
+    :func:`bayes_mr.data.noise.noise_floor` (quiet segment, else differencing).
+    """
+    out = []
+    missing = [c for c in channels if f"noise_sd_{c}" not in record.attrs]
+    floor = {}
+    if missing:
+        from .data.noise import noise_floor
+
+        floor = noise_floor(record, channels=missing)
+    for c in channels:
+        sd = record.attrs.get(f"noise_sd_{c}", floor.get(c))
+        if sd is None or not np.isfinite(sd) or sd <= 0:
+            sd = 1e-3 * float(np.std(record[c].values))
+        out.append(float(sd))
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class Parameterisation:
+    """Free parameters of (model, kind) and their estimation coordinates.
+
+    Attributes
+    ----------
+    model : Model
+    kind : str
+    coords : Coordinates
+        Free parameters (fixed ones excluded) and their plausible ranges.
+    template : ndarray
+        Full θ with fixed parameters at their values.
+    free_idx : ndarray of int
+        Positions of the free parameters in the full θ.
+    """
+
+    model: Model
+    kind: str
+    coords: Coordinates
+    template: np.ndarray
+    free_idx: np.ndarray
+
+    @classmethod
+    def build(
+        cls,
+        model: Model | str,
+        kind: str,
+        scales: Scales,
+        *,
+        ranges: dict[str, tuple[float, float]] | None = None,
+        fixed: dict[str, float] | None = None,
+    ) -> "Parameterisation":
+        model = get_model(model)
+        fixed = dict(fixed or {})
+        template = model.theta(kind, fixed)
+        names = model.param_names(kind)
+        free = [i for i in model.free_index(kind) if names[i] not in fixed]
+        specs = [s for s in model.free_specs(kind) if s.name not in fixed]
+        all_ranges = {s.name: s.plausible(scales) for s in specs}
+        for name, rng in (ranges or {}).items():
+            if name not in all_ranges:
+                raise ValueError(f"prior range for '{name}', which is not a free parameter of {model.name}; "
+                                 f"free: {', '.join(all_ranges)}")
+            all_ranges[name] = (float(rng[0]), float(rng[1]))
+        coords = Coordinates.build(tuple(specs), all_ranges)
+        return cls(model, kind, coords, template, np.array(free, np.int64))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.coords.names
+
+    def full(self, phi: np.ndarray) -> np.ndarray:
+        """Full θ (..., n_full) from free φ (..., p)."""
+        phi = np.asarray(phi, float)
+        out = np.broadcast_to(self.template, phi.shape[:-1] + self.template.shape).copy()
+        out[..., self.free_idx] = self.coords.to_theta(phi)
+        return out
+
+
+class OutputError:
+    """Gaussian output-error log-posterior of (model, record), batched over θ.
+
+    Parameters
+    ----------
+    model : Model or str
+    record : xarray.Dataset
+        Record in the package schema (quality mask in ``valid``).
+    ranges, fixed : dict, optional
+        Plausible-range overrides and fixed parameters (SI).
+    noise : {"sampled", "fixed"}
+        Sample ln σ_c with the parameters, or hold σ_c at ``noise_sd``.
+    noise_sd : array, optional
+        σ_c per channel for ``noise="fixed"`` (default: the record's noise floor).
+
+    Notes
+    -----
+    The parameter vector ``x`` is φ (free parameters, estimation coordinates)
+    followed, when the noise is sampled, by ln σ_c for each channel.
+    """
+
+    def __init__(
+        self,
+        model: Model | str,
+        record: xr.Dataset,
+        *,
+        ranges: dict | None = None,
+        fixed: dict | None = None,
+        noise: str = "sampled",
+        noise_sd: np.ndarray | None = None,
+        scales: Scales | None = None,
+    ):
+        if noise not in ("sampled", "fixed"):
+            raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
+        self.record = record
+        self.kind = record.attrs["kind"]
+        self.scales = scales or record_scales(record)
+        self.par = Parameterisation.build(model, self.kind, self.scales, ranges=ranges, fixed=fixed)
+        self.model = self.par.model
+        self.inputs = Inputs.from_record(record)
+        self.channels = OUTPUTS[self.kind]
+        y = np.column_stack([record[c].values for c in self.channels])
+        self.valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(y.shape[0], bool)
+        bad = ~np.isfinite(y[self.valid])
+        if bad.any():
+            raise ValueError(f"{record.attrs.get('source', 'record')}: non-finite measured values in valid samples")
+        self.y = y
+        self.n_valid = int(self.valid.sum())
+        self.noise = noise
+        self.noise_sd = np.asarray(noise_sd, float) if noise_sd is not None else channel_noise(record, self.channels)
+        sd_y = np.array([np.std(y[self.valid, j]) for j in range(len(self.channels))])
+        self.log_sigma_lo = np.log(SIGMA_SPAN[0] * sd_y)
+        self.log_sigma_hi = np.log(SIGMA_SPAN[1] * sd_y)
+        self.phi_lo = self.par.coords.phi_lower
+        self.phi_hi = self.par.coords.phi_upper
+        self._log_prior_const = -float(np.sum(np.log(self.phi_hi - self.phi_lo)))
+        if noise == "sampled":
+            self._log_prior_const -= float(np.sum(self.log_sigma_hi - self.log_sigma_lo))
+
+    # --- dimensions and names ---------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        return len(self.par.names)
+
+    @property
+    def ndim(self) -> int:
+        return self.n_params + (len(self.channels) if self.noise == "sampled" else 0)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        extra = tuple(f"sigma_{c}" for c in self.channels) if self.noise == "sampled" else ()
+        return self.par.names + extra
+
+    @property
+    def lower(self) -> np.ndarray:
+        lo = self.phi_lo
+        return np.concatenate([lo, self.log_sigma_lo]) if self.noise == "sampled" else lo
+
+    @property
+    def upper(self) -> np.ndarray:
+        hi = self.phi_hi
+        return np.concatenate([hi, self.log_sigma_hi]) if self.noise == "sampled" else hi
+
+    def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(φ (B, p), σ (B, n_channels)) from x (B, ndim)."""
+        x = np.atleast_2d(np.asarray(x, float))
+        phi = x[:, : self.n_params]
+        if self.noise == "sampled":
+            sigma = np.exp(x[:, self.n_params:])
+        else:
+            sigma = np.broadcast_to(self.noise_sd, (x.shape[0], len(self.channels)))
+        return phi, sigma
+
+    # --- model evaluation ------------------------------------------------------------
+    def simulate(self, phi: np.ndarray, schedule: np.ndarray | None = None) -> Simulation:
+        """Simulate the model for φ of shape (B, p) (or (p,))."""
+        return simulate(self.model, self.inputs, self.par.full(phi), schedule=schedule)
+
+    def predict(self, phi: np.ndarray, schedule: np.ndarray | None = None) -> tuple[np.ndarray, Simulation]:
+        """Predicted measured channels, shape (B, N, n_channels), and the simulation."""
+        sim = self.simulate(np.atleast_2d(phi), schedule)
+        yhat = np.stack([sim[c] for c in self.channels], axis=-1)
+        return yhat, sim
+
+    # --- densities ---------------------------------------------------------------------
+    def log_prior(self, x: np.ndarray) -> np.ndarray:
+        """ln p(x): uniform in φ over the plausible box (and log-uniform σ), −inf outside."""
+        x = np.atleast_2d(np.asarray(x, float))
+        inside = np.all((x >= self.lower) & (x <= self.upper), axis=1)
+        return np.where(inside, self._log_prior_const, -np.inf)
+
+    def log_likelihood(self, x: np.ndarray, *, pointwise: bool = False):
+        """ln p(y | x) for each row of x (B,); −inf where the simulation failed.
+
+        With ``pointwise`` also returns the per-sample terms (B, N, n_channels)
+        (zero at invalid samples).
+        """
+        phi, sigma = self.split(x)
+        yhat, sim = self.predict(phi)
+        r = (self.y[None] - yhat) / sigma[:, None, :]
+        terms = -0.5 * r * r - np.log(sigma)[:, None, :] - 0.5 * LOG_2PI
+        terms[:, ~self.valid, :] = 0.0
+        total = terms.sum(axis=(1, 2))
+        total = np.where(sim.ok & np.isfinite(total), total, -np.inf)
+        if pointwise:
+            return total, terms
+        return total
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """ln posterior (unnormalised) of each row of x; vectorised for emcee."""
+        x = np.atleast_2d(np.asarray(x, float))
+        if not np.all(np.isfinite(x)):
+            raise ValueError("log-posterior asked at a non-finite parameter vector")
+        lp = self.log_prior(x)
+        out = np.full(x.shape[0], -np.inf)
+        inside = np.isfinite(lp)
+        if inside.any():
+            out[inside] = lp[inside] + self.log_likelihood(x[inside])
+        return out
+
+    def residuals(self, phi: np.ndarray, sd: np.ndarray | None = None) -> np.ndarray:
+        """Standardised residuals (y − ŷ)/σ over valid samples, flattened (for least squares)."""
+        sd = self.noise_sd if sd is None else np.asarray(sd, float)
+        yhat, _ = self.predict(np.atleast_2d(phi))
+        return ((self.y[self.valid] - yhat[0][self.valid]) / sd).ravel()
