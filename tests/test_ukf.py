@@ -26,13 +26,13 @@ def blwn_ground(n, fs, seed, rms=1.0, band=8.0):
     return ag
 
 
-def structure_record(model, values, *, n=6000, fs=1000.0, mass=50.0, noise=0.01, seed=0, rms=3.0):
-    """Simulated structure test with noise on input (process) and outputs."""
+def structure_record(model, values, *, n=6000, fs=1000.0, mass=50.0, noise=0.01, seed=0, rms=3.0, process=True):
+    """Simulated structure test with noise on the outputs and (``process``) on the input."""
     model = get_model(model)
     rng = np.random.default_rng(seed + 1000)
     ag = blwn_ground(n, fs, seed, rms=rms)
     theta = model.theta("structure", values)
-    sd_ag = noise * ag.std()
+    sd_ag = noise * ag.std() if process else 0.0
     sim = simulate(model, Inputs.structure(ag + sd_ag * rng.standard_normal(n), 1 / fs, mass), theta)
     x, a = sim["displacement"], sim["acceleration"]
     sd_x, sd_a = noise * x.std(), noise * a.std()
@@ -41,7 +41,8 @@ def structure_record(model, values, *, n=6000, fs=1000.0, mass=50.0, noise=0.01,
         dict(ground_acceleration=ag, displacement=x + sd_x * rng.standard_normal(n),
              acceleration=a + sd_a * rng.standard_normal(n), force=sim["force"]),
         mass=mass, source="test",
-        attrs=dict(noise_sd_displacement=sd_x, noise_sd_acceleration=sd_a, noise_sd_ground_acceleration=sd_ag),
+        attrs=dict(noise_sd_displacement=sd_x, noise_sd_acceleration=sd_a,
+                   noise_sd_ground_acceleration=sd_ag if process else 1e-6 * ag.std()),
     )
     return rec, theta
 
