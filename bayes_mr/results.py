@@ -269,3 +269,8 @@ def point_of(idata: az.InferenceData) -> dict[str, float]:
     """The point estimate of a result as name → value [SI]."""
     pe = idata["point_estimate"]
     return {str(n): float(v) for n, v in zip(pe["param"].values, pe["theta"].values)}
+
+
+def set_summary(idata: az.InferenceData, summary: FitSummary) -> None:
+    """Replace the summary stored in a result (e.g. after adding wall time)."""
+    idata.posterior.attrs["summary"] = json.dumps(summary.to_dict())

@@ -216,7 +216,45 @@ def read_record(
     return ds
 
 
-def _read_csv(path: Path, src: str, overrides: dict[str, str]):
+def read_inputs(
+    path: str | os.PathLike, *, units: Mapping[str, str] | Iterable[str] | None = None
+) -> tuple[str, np.ndarray, dict[str, np.ndarray]]:
+    """Read an input-only CSV for ``bayes-mr simulate --input``.
+
+    The file has ``time`` and ``ground_acceleration`` (structure test) or
+    ``displacement`` (device test; optional ``velocity``), optionally
+    ``voltage``; units in brackets or ``units=`` as for :func:`read_record`.
+
+    Returns
+    -------
+    kind : {"structure", "device"}
+    time : ndarray, shape (n,)
+        Uniform time [s].
+    channels : dict
+        Input channels in SI.
+
+    Raises
+    ------
+    RecordError
+        As :func:`read_record`.
+    """
+    path = Path(path)
+    src = str(path)
+    if not path.exists():
+        raise _At(src).error("file not found", "check the path")
+    if _suffix(path) not in _CSV_SUFFIXES:
+        raise _At(src).error("inputs must be a CSV file", "write time and ground_acceleration (or displacement) as CSV")
+    time, channels, _, _ = _read_csv(path, src, _units.parse_unit_options(units), inputs_only=True)
+    kind = kind_of(channels)
+    measured = ("displacement", "acceleration", "force") if kind == STRUCTURE else ("force",)
+    outputs = [c for c in channels if c in measured]
+    if outputs:
+        raise _At(src, outputs[0], 1).error("an input file holds inputs only", "drop the measured outputs")
+    time, _ = _check_time(time, src, "line")
+    return kind, time, channels
+
+
+def _read_csv(path: Path, src: str, overrides: dict[str, str], inputs_only: bool = False):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", pd.errors.ParserWarning)
@@ -268,7 +306,7 @@ def _read_csv(path: Path, src: str, overrides: dict[str, str]):
         names[header] = name
         file_units[name] = unit
     present = list(names.values())
-    _check_columns(present, src, label_row=1)
+    _check_columns(present, src, label_row=1, inputs_only=inputs_only)
     _check_overrides(overrides, present, src)
 
     time = None
@@ -368,7 +406,7 @@ def _read_netcdf(path: Path, src: str, overrides: dict[str, str]):
     return time, channels, attrs, valid
 
 
-def _check_columns(present: list[str], src: str, label_row: int | None) -> None:
+def _check_columns(present: list[str], src: str, label_row: int | None, inputs_only: bool = False) -> None:
     kind = kind_of(present)
     valid = ("time",) + REQUIRED[kind] + OPTIONAL[kind]
     for name in present:
@@ -376,7 +414,8 @@ def _check_columns(present: list[str], src: str, label_row: int | None) -> None:
             raise _At(src, name, label_row).error(
                 f"unknown column for a {kind} test", f"valid columns: {', '.join(valid)}"
             )
-    for name in ("time",) + REQUIRED[kind]:
+    required = REQUIRED[kind][:1] if inputs_only else REQUIRED[kind]
+    for name in ("time",) + required:
         if name not in present:
             raise _At(src, name).error(
                 f"missing column for a {kind} test",

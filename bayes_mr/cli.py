@@ -1,0 +1,253 @@
+"""The ``bayes-mr`` command (verbs and flags fixed by ``../shared/SPEC.md``).
+
+Bad input ends with one line on stderr naming file, column, row and what to
+do, exit status 2, and nothing written. Ctrl-C ends with status 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+
+import numpy as np
+
+
+class CLIError(Exception):
+    """A user error the command reports in one line."""
+
+
+# --- small parsers ---------------------------------------------------------------------
+
+def _pairs(items: list[str] | None, flag: str) -> dict[str, str]:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise CLIError(f"{flag} {item!r}: expected NAME=VALUE")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _floats(items: list[str] | None, flag: str) -> dict[str, float]:
+    out = {}
+    for k, v in _pairs(items, flag).items():
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise CLIError(f"{flag} {k}={v}: not a number") from None
+    return out
+
+
+def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    out = {}
+    for k, v in _pairs(items, "--prior").items():
+        try:
+            lo, hi = (float(p) for p in v.split(":"))
+        except ValueError:
+            raise CLIError(f"--prior {k}={v}: expected LO:HI in SI units") from None
+        out[k] = (lo, hi)
+    return out
+
+
+def _progress(enabled: bool):
+    """A one-line progress reporter on stderr (only on a terminal)."""
+    if not enabled or not sys.stderr.isatty():
+        return lambda msg: None
+    return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
+
+
+def _read(path: str, args, *, what: str = "record"):
+    from .data import read_record
+
+    return read_record(
+        path, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
+        quality=not getattr(args, "no_quality", False), trim=getattr(args, "trim", False),
+    )
+
+
+def _write_json(data: dict, path: str | None) -> None:
+    import json
+
+    from .results import _jsonable, write_json
+
+    if path:
+        write_json(data, path)
+    else:
+        print(json.dumps(_jsonable(data), indent=2))
+
+
+# --- verbs -----------------------------------------------------------------------------
+
+def cmd_simulate(args) -> int:
+    from .data.io import read_inputs, write_record
+    from .models import EFFECTS, get_model
+    from .signals import make_signal
+    from .simulate import synthesize
+
+    model = get_model(args.model)
+    effect_values = _floats(args.effect, "--effect")
+    for name in effect_values:
+        if name not in EFFECTS:
+            raise CLIError(f"--effect {name}: unknown effect; valid: {', '.join(EFFECTS)}")
+        if model.effect(name) is None:
+            model = model + EFFECTS[name]
+    params = _floats(args.param, "--param")
+    for name, value in effect_values.items():
+        params.setdefault(EFFECTS[name].primary, value)
+    if args.input:
+        kind, time, inputs = read_inputs(args.input, units=args.units)
+        if kind == "device" and "velocity" not in inputs:
+            from .data.derive import smooth_velocity
+
+            inputs["velocity"] = smooth_velocity(inputs["displacement"], float(time[1] - time[0]))
+        source = f"simulate {model.name} --input {args.input}"
+    elif args.signal:
+        kind = args.kind or ("structure" if args.mass else "device")
+        opts = {k: getattr(args, k) for k in ("duration", "fs", "amplitude", "fmax", "scale") if getattr(args, k) is not None}
+        sig = make_signal(args.signal, seed=args.seed, **opts)
+        time = sig.time
+        inputs = sig.as_input(kind)
+        source = f"simulate {model.name} --signal {args.signal}"
+    else:
+        raise CLIError("give the input: --input CSV or --signal NAME (see --help)")
+    if kind == "structure" and not args.mass:
+        raise CLIError("a structure test needs the storey mass: pass --mass KG")
+    if args.voltage is not None and "voltage" not in inputs:
+        inputs["voltage"] = np.full(time.size, args.voltage)
+    theta = model.theta(kind, params)
+    rec = synthesize(model, theta, time, inputs, mass=args.mass if kind == "structure" else None,
+                     noise=args.noise, seed=args.seed, source=source)
+    path = write_record(rec, args.output)
+    print(f"wrote {path}: {kind} test, {rec.sizes['time']} samples at {rec.attrs['fs']:.6g} Hz, model {model.name}",
+          file=sys.stderr)
+    return 0
+
+
+def cmd_fit(args) -> int:
+    from . import results
+    from .identify import Identify, engine
+
+    rec = _read(args.data, args)
+    est = engine(args.engine)
+    validate_on = _read(args.validate, args) if getattr(args, "validate", None) else None
+    job = Identify(args.model, est, ranges=_ranges(args.prior), fixed=_floats(args.fix, "--fix"))
+    idata = job.fit(rec, seed=args.seed, progress=not args.quiet, validate_on=validate_on)
+    summary = results.summary_of(idata).to_dict()
+    if args.output:
+        results.save(idata, args.output)
+    _write_json(summary, args.json)
+    return 0
+
+
+def cmd_validate(args) -> int:
+    from . import results
+    from .identify import validate
+
+    idata = results.load(args.result)
+    rec = _read(args.data, args)
+    _write_json(validate(idata, rec), args.json)
+    return 0
+
+
+VERBS = {
+    "simulate": cmd_simulate,
+    "fit": cmd_fit,
+    "validate": cmd_validate,
+}
+
+
+def _common_data_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests; or a netCDF 'mass' attribute)")
+    p.add_argument("--units", action="append", metavar="COLUMN=UNIT",
+                   help="unit of a column whose header has none, e.g. displacement=cm (cm, mm, g, kN, …)")
+    p.add_argument("--no-quality", action="store_true",
+                   help="do not mask clipped, spiky or disturbed samples (quality control is on by default)")
+    p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .models import EFFECTS, FORMS
+
+    forms = ", ".join(FORMS)
+    effects = ", ".join(EFFECTS)
+    parser = argparse.ArgumentParser(
+        prog="bayes-mr",
+        description="Bayesian identification, model selection and diagnosis of MR dampers "
+                    "(UKF, emcee and least squares on one likelihood).",
+    )
+    sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
+
+    p = sub.add_parser("simulate", help="simulate a test record of a model (with noise)",
+                       description=f"Simulate a structure or device test. Forms: {forms}. Effects: {effects}.")
+    p.add_argument("--model", required=True, help="FORM[+EFFECT...], e.g. dahl or dahl+force_offset")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="parameter value in SI (repeat); unset ones take the thesis/published defaults")
+    p.add_argument("--effect", action="append", metavar="NAME=VALUE",
+                   help="switch an effect on and set its main parameter, e.g. force_offset=20 (repeat)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--input", metavar="CSV", help="CSV with time and ground_acceleration (or displacement)")
+    src.add_argument("--signal", metavar="NAME", help="a thesis signal: blwn, amp-sweep-up-down, amp-sweep-up, "
+                                                     "freq-sweep-up, freq-sweep-up-down, step, elcentro, loma-prieta")
+    p.add_argument("--kind", choices=("structure", "device"),
+                   help="with --signal: drive a frame (needs --mass) or the damper alone (default: structure if --mass)")
+    p.add_argument("--duration", type=float, help="signal length [s]")
+    p.add_argument("--fs", type=float, help="sampling rate [Hz]")
+    p.add_argument("--amplitude", type=float, help="signal amplitude [m]")
+    p.add_argument("--fmax", type=float, help="signal frequency limit [Hz]")
+    p.add_argument("--scale", type=float, help="earthquake scale factor")
+    p.add_argument("--voltage", type=float, help="constant command voltage [V]")
+    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests)")
+    p.add_argument("--units", action="append", metavar="COLUMN=UNIT", help="units of --input columns")
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="noise as a fraction of each channel's RMS on input and outputs (0.01 = 1 %%)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (noise and random signals)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output record (.csv, .csv.gz or .nc)")
+
+    p = sub.add_parser("fit", help="fit one model with one estimator",
+                       description="Fit a model to a record. Writes the SPEC's fit JSON and, with -o, the "
+                                   "full result (ArviZ InferenceData, netCDF).")
+    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("--model", required=True, help=f"FORM[+EFFECT...]; forms: {forms}")
+    p.add_argument("--engine", choices=("ukf", "mcmc", "lsq"), default="lsq", help="estimator (default lsq)")
+    p.add_argument("--validate", metavar="DATA2",
+                   help="(ukf) choose the trained run by its MSE on this other record (thesis method 2)")
+    p.add_argument("--prior", action="append", metavar="NAME=LO:HI", help="plausible range of a parameter [SI]")
+    p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="hold a parameter fixed [SI]")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("-o", "--output", metavar="RESULT.nc", help="write the full result")
+    p.add_argument("--json", metavar="SUMMARY.json", help="write the summary here (default: stdout)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    _common_data_flags(p)
+
+    p = sub.add_parser("validate", help="predict another record with a fitted model (thesis method 2)",
+                       description="Simulate the fitted point estimate on another record and score it; "
+                                   "same JSON keys as fit.")
+    p.add_argument("result", help="RESULT.nc written by fit -o")
+    p.add_argument("data", help="the other record")
+    p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
+    _common_data_flags(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``bayes-mr``."""
+    from .data.schema import RecordError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            return VERBS[args.verb](args)
+    except (CLIError, RecordError, ValueError, FileNotFoundError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"bayes-mr {args.verb}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"bayes-mr {args.verb}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
