@@ -124,35 +124,47 @@ def _sigma_points(m, P, S, Pj, X, spread, L):
 
 
 @hot
-def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same):
+def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA, DB):
     """Unscented mean of the rows of A (and B) and their cross-covariance Pab.
 
     ``central`` sums about the first (central) point:
     m = A₀ + δ, P = Σ_{i≥1} W_i ΔA_i ΔB_iᵀ + (β − α²) δ_A δ_Bᵀ;
     otherwise with the raw weights (thesis, filterpy). When ``same`` only the
-    lower triangle is computed and mirrored.
+    lower triangle is computed and mirrored, and B, mb, db, DB must be the
+    same arrays as A, ma, da, DA. DA, DB are scratch (nsig, ·): the
+    deviations are formed once, not once per covariance entry.
     """
     na = A.shape[1]
     nb = B.shape[1]
     if central:
+        # when ``same``, B is A and db, mb, DB alias da, ma, DA: fill them once
         for q in range(na):
-            acc = 0.0
-            for i in range(1, nsig):
-                acc += A[i, q] - A[0, q]
-            da[q] = wi * acc
+            da[q] = 0.0
+        for i in range(1, nsig):
+            for q in range(na):
+                v = A[i, q] - A[0, q]
+                DA[i, q] = v
+                da[q] += v
+        for q in range(na):
+            da[q] *= wi
             ma[q] = A[0, q] + da[q]
-        for q in range(nb):
-            acc = 0.0
+        if not same:
+            for q in range(nb):
+                db[q] = 0.0
             for i in range(1, nsig):
-                acc += B[i, q] - B[0, q]
-            db[q] = wi * acc
-            mb[q] = B[0, q] + db[q]
+                for q in range(nb):
+                    v = B[i, q] - B[0, q]
+                    DB[i, q] = v
+                    db[q] += v
+            for q in range(nb):
+                db[q] *= wi
+                mb[q] = B[0, q] + db[q]
         for q in range(na):
             top = q + 1 if same else nb
             for r in range(top):
                 acc = 0.0
                 for i in range(1, nsig):
-                    acc += (A[i, q] - A[0, q]) * (B[i, r] - B[0, r])
+                    acc += DA[i, q] * DB[i, r]
                 v = wi * acc + ab * da[q] * db[r]
                 Pab[q, r] = v
                 if same:
@@ -163,17 +175,24 @@ def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same):
             for i in range(1, nsig):
                 acc += wi * A[i, q]
             ma[q] = acc
-        for q in range(nb):
-            acc = w0m * B[0, q]
-            for i in range(1, nsig):
-                acc += wi * B[i, q]
-            mb[q] = acc
+        if not same:
+            for q in range(nb):
+                acc = w0m * B[0, q]
+                for i in range(1, nsig):
+                    acc += wi * B[i, q]
+                mb[q] = acc
+        for i in range(nsig):
+            for q in range(na):
+                DA[i, q] = A[i, q] - ma[q]
+            if not same:
+                for q in range(nb):
+                    DB[i, q] = B[i, q] - mb[q]
         for q in range(na):
             top = q + 1 if same else nb
             for r in range(top):
-                acc = w0c * (A[0, q] - ma[q]) * (B[0, r] - mb[r])
+                acc = w0c * DA[0, q] * DB[0, r]
                 for i in range(1, nsig):
-                    acc += wi * (A[i, q] - ma[q]) * (B[i, r] - mb[r])
+                    acc += wi * DA[i, q] * DB[i, r]
                 Pab[q, r] = acc
                 if same:
                     Pab[r, q] = acc
@@ -185,7 +204,7 @@ def _ukf_loop(
     h, inputs, yobs, valid, m, P, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, hist_m, hist_sd, states_m, store_states, info,
-    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY,
 ):
     """The filter loop proper (no allocation; see :func:`ukf_run`).
 
@@ -255,7 +274,7 @@ def _ukf_loop(
             status = NON_FINITE
             step = k + 1
             break
-        _moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True)
+        _moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
         for q in range(L):
             for r in range(L):
                 P[q, r] += Q[q, r]
@@ -277,8 +296,8 @@ def _ukf_loop(
                 status = NON_FINITE
                 step = k + 1
                 break
-            _moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True)
-            _moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False)
+            _moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
+            _moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
             for q in range(ny):
                 for r in range(ny):
                     Pyy[q, r] += R[q, r]
@@ -401,12 +420,14 @@ def ukf_run(
     Kg = np.zeros((L, ny))
     nu = np.zeros(ny)
     z = np.zeros(ny)
+    DX = np.zeros((nsig, L))
+    DY = np.zeros((nsig, ny))
     _ukf_loop(
         lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
         h, inputs, yobs, valid, m, P, Q, R,
         w0m, w0c, wi, spread, ab, central,
         stride, hist_m, hist_sd, states_m, store_states, info,
-        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z,
+        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY,
     )
 
 

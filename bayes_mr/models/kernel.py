@@ -258,8 +258,9 @@ def rate(lay, cst, p, t, s, vmax):
         zf = max(z, 0.1 * zsat) if n < 1.0 else max(z, zsat)
         yd = (alpha * z + c0 * vmax + k0 * abs(s[i])) / (c0 + c1)
         rr = vmax + abs(yd)
-        lam = n * math.pow(zf, n - 1.0) * (gam + bet) * rr
-        lam += (A + (gam + bet) * math.pow(zf, n)) * alpha / (c0 + c1)
+        zn1 = math.pow(zf, n - 1.0)
+        lam = n * zn1 * (gam + bet) * rr
+        lam += (A + (gam + bet) * zn1 * zf) * alpha / (c0 + c1)
         lam += k0 / (c0 + c1) + eta
         damp = c0 * c1 / (c0 + c1)
         if lay[L_PFRAME] >= 0:
@@ -287,8 +288,9 @@ def rate(lay, cst, p, t, s, vmax):
             n = p[o + 4]
             sg = p[o + 5]
             zf = max(z, 0.1) if n < 1.0 else max(z, 1.0)
-            lam = rho * n * math.pow(zf, n - 1.0) * vmax * (sg + abs(sg - 1.0))
-            slope = rho * (1.0 + (sg + abs(sg - 1.0)) * math.pow(zf, n))
+            zn1 = math.pow(zf, n - 1.0)
+            lam = rho * n * zn1 * vmax * (sg + abs(sg - 1.0))
+            slope = rho * (1.0 + (sg + abs(sg - 1.0)) * zn1 * zf)
         else:
             beta1 = p[o + 2]
             gam = p[o + 3]
@@ -296,8 +298,9 @@ def rate(lay, cst, p, t, s, vmax):
             bg = beta1 + abs(gam)
             rsat = math.pow(1.0 / bg, 1.0 / n)
             zf = max(z, 0.1 * rsat) if n < 1.0 else max(z, rsat)
-            lam = n * math.pow(zf, n - 1.0) * vmax * bg
-            slope = 1.0 + bg * math.pow(zf, n)
+            zn1 = math.pow(zf, n - 1.0)
+            lam = n * zn1 * vmax * bg
+            slope = 1.0 + bg * zn1 * zf
         if lay[L_LVR] >= 0:
             lam += slope * coef / p[lay[L_LVR]]
         coupling = coef * slope
