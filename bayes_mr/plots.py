@@ -1,0 +1,132 @@
+"""Figures the thesis shows, from bayes_mr results (matplotlib, Agg backend).
+
+Each function draws one figure and returns it; :func:`save` writes a PNG and
+closes it. Nothing here computes a result: figures show what the engines
+already stored.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def save(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Write ``fig`` as PNG and close it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "", xlabel: str = "displacement [mm]",
+               window: slice | None = None, scale_x: float = 1e3):
+    """Force–displacement loops: each entry of ``curves`` is a force series [N]."""
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    sl = window or slice(None)
+    for i, (label, f) in enumerate(curves.items()):
+        ax.plot(np.asarray(x)[sl] * scale_x, np.asarray(f)[sl], lw=0.8 if i else 1.2, label=label,
+                alpha=0.9 if i else 0.6)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("force [N]")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, title: str = "",
+                window: tuple[float, float] | None = None):
+    """Stacked panels of time series: ``panels[ylabel][label] = values``."""
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
+    t = np.asarray(t)
+    sl = slice(None) if window is None else (t >= window[0]) & (t <= window[1])
+    for ax, (ylabel, series) in zip(axes[:, 0], panels.items()):
+        for i, (label, y) in enumerate(series.items()):
+            ax.plot(t[sl], np.asarray(y)[sl], lw=0.8, label=label, alpha=1.0 if i == 0 else 0.85)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def convergence(t: np.ndarray, history: dict[str, np.ndarray], truth: dict[str, float] | None = None,
+                sd: dict[str, np.ndarray] | None = None, *, title: str = ""):
+    """Parameter convergence histories (thesis Fig. 3.8, 3.47, 5.24)."""
+    names = list(history)
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.6 * len(names)), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], names):
+        h = np.asarray(history[name])
+        ax.plot(t, h, lw=0.9)
+        if sd is not None and name in sd:
+            ax.fill_between(t, h - 2 * sd[name], h + 2 * sd[name], alpha=0.2, lw=0)
+        if truth and name in truth:
+            ax.axhline(truth[name], color="k", ls="--", lw=0.8)
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None = None, *, title: str = ""):
+    """Histograms of trained models' parameters (thesis Fig. 3.27, 5.3–5.5)."""
+    names = list(values)
+    cols = min(3, len(names))
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.5 * rows), squeeze=False)
+    for ax, name in zip(axes.ravel(), names):
+        v = np.asarray(values[name], float)
+        v = v[np.isfinite(v)]
+        if v.size:
+            pos = np.all(v > 0) and v.max() / max(v.min(), 1e-300) > 30
+            bins = np.geomspace(v.min(), v.max(), 20) if pos else 20
+            ax.hist(v, bins=bins, color="tab:blue", alpha=0.75)
+            if pos:
+                ax.set_xscale("log")
+        if truth and name in truth:
+            ax.axvline(truth[name], color="k", ls="--", lw=1)
+        ax.set_title(name, fontsize=9)
+    for ax in axes.ravel()[len(names):]:
+        ax.axis("off")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: int = 30):
+    """Residual ``r`` against several variables: binned mean ± SD (diagnose views)."""
+    fig, axes = plt.subplots(1, len(xs), figsize=(3.2 * len(xs), 2.8), squeeze=False)
+    r = np.asarray(r, float)
+    for ax, (label, x) in zip(axes[0], xs.items()):
+        x = np.asarray(x, float)
+        edges = np.quantile(x, np.linspace(0, 1, nbins + 1))
+        edges = np.unique(edges)
+        idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, edges.size - 2)
+        centers, mean, sd = [], [], []
+        for b in range(edges.size - 1):
+            sel = idx == b
+            if sel.sum() > 3:
+                centers.append(np.median(x[sel]))
+                mean.append(r[sel].mean())
+                sd.append(r[sel].std())
+        centers, mean, sd = map(np.asarray, (centers, mean, sd))
+        ax.plot(centers, mean, "o-", ms=3)
+        ax.fill_between(centers, mean - sd, mean + sd, alpha=0.2)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel(label)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("residual")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
