@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -150,10 +151,53 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def studies_dir() -> Path:
+    """The ``studies/`` folder of the source tree this package runs from."""
+    return Path(__file__).resolve().parents[1] / "studies"
+
+
+def study_names() -> list[str]:
+    d = studies_dir()
+    return sorted(p.stem.replace("_", "-") for p in d.glob("*.py") if not p.stem.startswith("_")) if d.is_dir() else []
+
+
+def cmd_study(args) -> int:
+    import importlib.util
+
+    names = study_names()
+    if args.name in (None, "list"):
+        print("\n".join(names) if names else f"no studies found in {studies_dir()}")
+        return 0
+    if args.name not in names:
+        raise CLIError(f"unknown study '{args.name}'; valid: {', '.join(names) or 'none (studies/ not found)'}")
+    path = studies_dir() / (args.name.replace("-", "_") + ".py")
+    spec = importlib.util.spec_from_file_location(f"bayes_mr_study_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = args.out or str(Path("results") / "studies" / args.name)
+    summary = module.main(out_dir=out, quick=args.quick, seed=args.seed)
+    _write_json(summary, args.json)
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from .bench import bench_markdown, run_bench
+    from .readme import project_readme, update_section
+
+    say = _progress(True)
+    result = run_bench(seed=args.seed, progress=say)
+    _write_json(result, args.json)
+    if not args.no_readme and update_section(project_readme(), "bench", bench_markdown(result)):
+        print(f"updated the Performance section of {project_readme()}", file=sys.stderr)
+    return 0
+
+
 VERBS = {
     "simulate": cmd_simulate,
     "fit": cmd_fit,
     "validate": cmd_validate,
+    "study": cmd_study,
+    "bench": cmd_bench,
 }
 
 
@@ -227,6 +271,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", help="the other record")
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
     _common_data_flags(p)
+
+    p = sub.add_parser("study", help="run one study of studies/ (thesis reproductions and extensions)",
+                       description="Run a study script of the studies/ folder; `bayes-mr study list` lists them.")
+    p.add_argument("name", nargs="?", help="study name (e.g. table-3-2), or 'list'")
+    p.add_argument("--quick", action="store_true", help="small inputs (what CI runs)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default results/studies/NAME)")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--json", metavar="OUT.json", help="write the study's summary here (default: stdout)")
+
+    p = sub.add_parser("bench", help="the performance benchmark (UKF vs filterpy, training, MCMC, LSQ)",
+                       description="Measure the UKF per step against filterpy on the same model and data, a "
+                                   "100-prior training at the thesis's size, and MCMC/least-squares wall times; "
+                                   "writes the figures into README.md.")
+    p.add_argument("--json", metavar="OUT.json", help="write the figures here (default: stdout)")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--no-readme", action="store_true", help="do not update README.md")
     return parser
 
 
