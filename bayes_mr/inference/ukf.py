@@ -201,8 +201,37 @@ def _initial(problem: Problem, prior: Prior, settings: UKFSettings):
     return m0, P0, Q
 
 
-def run_priors(problem: Problem, priors: list[Prior], settings: UKFSettings = UKFSettings()) -> dict:
+def _reset_mask(problem: Problem, reset) -> np.ndarray:
+    n = problem.inputs.n
+    if reset is None:
+        return np.zeros(n, bool)
+    reset = np.ascontiguousarray(reset, dtype=bool)
+    if reset.shape != (n,):
+        raise ValueError(f"reset must have one entry per sample, shape ({n},), got {reset.shape}")
+    return reset
+
+
+def run_priors(
+    problem: Problem,
+    priors: list[Prior],
+    settings: UKFSettings = UKFSettings(),
+    *,
+    reset: np.ndarray | None = None,
+    parallel: bool = True,
+) -> dict:
     """Filter the record once per prior (in parallel); raw arrays.
+
+    Parameters
+    ----------
+    reset : bool array, shape (N,), optional
+        True where a sample starts another record filtered in the same run:
+        the model states restart from rest there while φ carries over
+        (thesis method 3, sequential rather than a stacked state vector —
+        see :func:`bayes_mr.inference.ukf_kernel.ukf_run`). Default: none.
+    parallel : bool
+        Spread the runs over numba's threads (True), or filter them one after
+        another in this thread, releasing the GIL (for callers that
+        parallelise themselves, e.g. an executor running chunks).
 
     Returns
     -------
@@ -210,6 +239,7 @@ def run_priors(problem: Problem, priors: list[Prior], settings: UKFSettings = UK
     ``hist_mean``/``hist_sd`` (R, H, L), ``hist_index`` (H,), ``wall_s``.
     """
     args = _kernel_args(problem, settings)
+    reset = _reset_mask(problem, reset)
     ns = len(problem.p0_states)
     L = ns + len(problem.coords.names)
     N = problem.inputs.n
@@ -225,23 +255,38 @@ def run_priors(problem: Problem, priors: list[Prior], settings: UKFSettings = UK
     HS = np.full((R_, H, L), np.nan)
     INFO = np.zeros((R_, K.INFO_SIZE))
     t0 = _time.perf_counter()
-    K.ukf_batch(
+    common = (
         args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
-        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"],
-        M, PP, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
-        args["central"], stride, HM, HS, INFO,
+        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
     )
+    weights = (args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"], args["central"], stride)
+    if parallel:
+        K.ukf_batch(*common, M, PP, Q, problem.R, *weights, HM, HS, INFO)
+    else:
+        dummy = np.zeros((1, L))
+        for r in range(R_):
+            K.ukf_run(*common, M[r], PP[r], Q, problem.R, *weights, HM[r], HS[r], dummy, False, INFO[r])
     wall = _time.perf_counter() - t0
     return dict(mean=M, cov=PP, info=INFO, hist_mean=HM, hist_sd=HS,
                 hist_index=np.arange(H) * stride, wall_s=wall)
 
 
-def filter_states(problem: Problem, prior: Prior, settings: UKFSettings = UKFSettings()) -> dict:
+def filter_states(
+    problem: Problem,
+    prior: Prior,
+    settings: UKFSettings = UKFSettings(),
+    *,
+    reset: np.ndarray | None = None,
+) -> dict:
     """One filter run keeping the full state-mean history (for figures).
+
+    ``reset`` (N,) bool marks samples that start another record (see
+    :func:`run_priors`).
 
     Returns ``states`` (N, L) filtered means, ``mean``/``cov`` final, ``info``.
     """
     args = _kernel_args(problem, settings)
+    reset = _reset_mask(problem, reset)
     m, P, Q = _initial(problem, prior, settings)
     L = m.size
     N = problem.inputs.n
@@ -251,7 +296,7 @@ def filter_states(problem: Problem, prior: Prior, settings: UKFSettings = UKFSet
     hs = np.zeros((1, L))
     K.ukf_run(
         args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
-        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"],
+        args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
         m, P, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
         args["central"], N + 1, hm, hs, states, True, info,
     )

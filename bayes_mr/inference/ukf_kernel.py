@@ -201,10 +201,10 @@ def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, D
 @hot
 def _ukf_loop(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, m, P, Q, R,
+    h, inputs, yobs, valid, reset, m, P, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, hist_m, hist_sd, states_m, store_states, info,
-    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY,
+    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
 ):
     """The filter loop proper (no allocation; see :func:`ukf_run`).
 
@@ -212,6 +212,11 @@ def _ukf_loop(
     predicted moments + Q; sigma points redrawn about the prediction (so the
     measurement sees Q, as in the exact Kalman filter — filterpy #172);
     measurement moments + R; Kalman update; box the mean of φ.
+
+    Where ``reset[k]`` sample k starts another record: the model states go
+    back to rest (mean 0, covariance block P0s, no state–parameter
+    covariance), time restarts at 0, and there is no transition (and no
+    update) from sample k−1 to k. φ and its covariance carry over.
     """
     N = inputs.shape[0]
     ns = lay[L_NS]
@@ -228,7 +233,18 @@ def _ukf_loop(
     step = -1
     log2pi = math.log(2.0 * math.pi)
     i_hist = 0
+    k_seg = 0  # first sample of the current record (time restarts there)
     for k in range(N):
+        if reset[k]:
+            k_seg = k
+            for q in range(ns):
+                m[q] = 0.0
+                for r in range(L):
+                    P[q, r] = 0.0
+                    P[r, q] = 0.0
+            for q in range(ns):
+                for r in range(ns):
+                    P[q, r] = P0s[q, r]
         if store_states:
             for q in range(L):
                 states_m[k, q] = m[q]
@@ -239,7 +255,9 @@ def _ukf_loop(
             i_hist += 1
         if k == N - 1:
             break
-        t = k * h
+        if reset[k + 1]:
+            continue  # the next record starts from rest: nothing links k to k+1
+        t = (k - k_seg) * h
         # --- predict: propagate every sigma point over [t, t+h] ------------
         jit = _sigma_points(m, P, S, Pj, X, spread, L)
         if jit < 0:
@@ -372,10 +390,10 @@ def _ukf_loop(
     info[I_NUPD] = n_upd
 
 
-@driver
+@driver(nogil=True)
 def ukf_run(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, m, P, Q, R,
+    h, inputs, yobs, valid, reset, m, P, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, hist_m, hist_sd, states_m, store_states, info,
 ):
@@ -388,6 +406,24 @@ def ukf_run(
     free_idx, is_log, scale : free-parameter positions and coordinates.
     phi_lo, phi_hi : box kept by the mean of φ and by sigma-point evaluation.
     h : sample interval [s]. inputs : (N, 3). yobs : (N, ny). valid : (N,) bool.
+    reset : (N,) bool
+        True where a sample starts another record filtered in the same run
+        (thesis method 3, both signals at once). There the model states go
+        back to rest — mean 0, their block of P back to its value on entry,
+        state–parameter covariance zeroed — time restarts, and no transition
+        or update links the sample to the one before; φ and its covariance
+        carry over. This is sequential, not the thesis's stacked state vector
+        [s_A, s_B, φ] (Lund et al. 2020): given φ the two records' states are
+        independent (separate inputs and noise), so p(y_A, y_B | φ) =
+        p(y_A | φ) p(y_B | φ) and Bayes' rule gives the same posterior of φ
+        whichever order the records are conditioned on. The parameters see
+        the same data through the same likelihood; what differs is the
+        Gaussian approximation (linearised at later φ estimates for the
+        second record) and the random walk of φ, which lets the later record
+        weigh slightly more. In exchange the state has L = n_s + p, not
+        2n_s + p, entries (2L+1 sigma points, O(L³) per step) and the records
+        need not be the same length. The innovation log-likelihood summed
+        over both records is ln p(y_A) + ln p(y_B | y_A) = ln p(y_A, y_B).
     m, P : (L,), (L, L) prior mean/covariance on entry, posterior on exit.
     Q, R : (L, L), (ny, ny) additive process and measurement noise per step.
     w0m, w0c, wi, spread, ab : sigma-point weights, √(L+λ), β − α².
@@ -422,19 +458,20 @@ def ukf_run(
     z = np.zeros(ny)
     DX = np.zeros((nsig, L))
     DY = np.zeros((nsig, ny))
+    P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
         lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-        h, inputs, yobs, valid, m, P, Q, R,
+        h, inputs, yobs, valid, reset, m, P, Q, R,
         w0m, w0c, wi, spread, ab, central,
         stride, hist_m, hist_sd, states_m, store_states, info,
-        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY,
+        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
     )
 
 
-@driver(parallel=True)
+@driver(parallel=True, nogil=True)
 def ukf_batch(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, M, PP, Q, R,
+    h, inputs, yobs, valid, reset, M, PP, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, HM, HS, INFO,
 ):
@@ -444,7 +481,7 @@ def ukf_batch(
     for r in prange(n_runs):
         ukf_run(
             lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-            h, inputs, yobs, valid, M[r], PP[r], Q, R,
+            h, inputs, yobs, valid, reset, M[r], PP[r], Q, R,
             w0m, w0c, wi, spread, ab, central,
             stride, HM[r], HS[r], dummy, False, INFO[r],
         )
