@@ -29,7 +29,7 @@ def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "",
                window: slice | None = None, scale_x: float = 1e3):
     """Force–displacement loops: each entry of ``curves`` is a force series [N]."""
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    sl = window or slice(None)
+    sl = slice(None) if window is None else window
     for i, (label, f) in enumerate(curves.items()):
         ax.plot(np.asarray(x)[sl] * scale_x, np.asarray(f)[sl], lw=0.8 if i else 1.2, label=label,
                 alpha=0.9 if i else 0.6)
