@@ -1,0 +1,47 @@
+"""Studies run end to end on small inputs (the full runs are `bayes-mr study NAME` / slow tests)."""
+
+import json
+
+import pytest
+
+from bayes_mr.cli import main, study_names
+
+
+def run_study(name, tmp_path, *extra):
+    out = tmp_path / name
+    summary = tmp_path / f"{name}.json"
+    assert main(["study", name, "--out", str(out), "--json", str(summary), *extra]) == 0
+    return out, json.loads(summary.read_text())
+
+
+def test_studies_are_listed():
+    assert {"table-3-2", "numerical-selection"} <= set(study_names())
+
+
+def test_table_3_2_quick(tmp_path):
+    out, summary = run_study("table-3-2", tmp_path, "--quick")
+    assert (out / "table_3_2.csv").exists() and (out / "figures" / "hysteresis.png").exists()
+    assert summary["1%"]["max_error_%"] < 5.0
+
+
+def test_numerical_selection_quick(tmp_path):
+    out, summary = run_study("numerical-selection", tmp_path, "--quick")
+    assert (out / "report.md").exists() and (out / "figures" / "loops_zoom.png").exists()
+    assert summary["dahl_max_error"] < 0.05
+    assert summary["dahl_trained_fraction"] >= 0.9
+
+
+@pytest.mark.slow
+def test_table_3_2_full(tmp_path):
+    """Thesis Table 3.2 reproduced: every parameter within 5 % at 1 % and 2 % noise."""
+    _, summary = run_study("table-3-2", tmp_path)
+    assert summary["1%"]["max_error_%"] < 5.0
+    assert summary["2%"]["max_error_%"] < 5.0
+
+
+@pytest.mark.slow
+def test_numerical_selection_full(tmp_path):
+    """§3.8 at the thesis's size: Dahl recovered within 5 %, ≥ 90 % of runs train."""
+    _, summary = run_study("numerical-selection", tmp_path)
+    assert summary["dahl_max_error"] < 0.05
+    assert summary["dahl_trained_fraction"] >= 0.9
