@@ -23,7 +23,7 @@ from .inference.ukf import TAUS, UKFSettings
 from .likelihood import OutputError
 from .models import Model, get_model
 from .results import FitSummary
-from .selection.scores import score
+from .scores import score
 from .simulate import Inputs, simulate
 
 
@@ -50,8 +50,14 @@ class UKF:
 class Emcee:
     """emcee posterior started at the least-squares optimum (:mod:`bayes_mr.inference.mcmc`).
 
-    ``evidence``: ``"ti"`` (thermodynamic integration) or ``"laplace"``.
+    ``evidence``: ``"ti"`` (thermodynamic integration over a temperature
+    ladder, with stepping-stone and Laplace beside it) or ``"laplace"`` (no
+    ladder: the cheap route).
     """
+
+    def __post_init__(self):
+        if self.evidence not in ("ti", "laplace"):
+            raise ValueError(f"evidence must be 'ti' or 'laplace', got {self.evidence!r}")
 
     settings: object | None = None
     evidence: str = "ti"
@@ -165,12 +171,16 @@ class Identify:
         if isinstance(est, LeastSquares):
             idata = lsq_inference_data(lik, res, record, seed=seed)
         else:
-            from .inference.mcmc import MCMCSettings, fit_mcmc
-            from .selection.mcmc_fit import mcmc_inference_data
+            from .inference.evidence import evidence_routes, laplace_evidence
+            from .inference.mcmc import MCMCSettings, fit_mcmc, to_inference_data
 
             settings = est.settings or MCMCSettings(seed=seed, progress=progress)
             chain = fit_mcmc(lik, lsq=res, settings=settings)
-            idata = mcmc_inference_data(lik, chain, res, record, evidence=est.evidence, seed=seed)
+            if est.evidence == "ti":
+                routes = evidence_routes(lik, lsq=res, posterior=chain, seed=seed)
+            else:
+                routes = {"laplace": laplace_evidence(res)}
+            idata = to_inference_data(lik, chain, res, evidence=routes, record=record)
         summary = results.summary_of(idata)
         summary.wall_s = _time.perf_counter() - t0
         results.set_summary(idata, summary)

@@ -7,7 +7,7 @@
 * :mod:`.ukf_fit` — the ``ukf`` engine of ``bayes-mr fit`` (InferenceData).
 """
 
-from .scores import Scorer, score
+from ..scores import Scorer, score
 from .training import concat_records, train
 from .validation import Trial, method1, method2, method3, select, validate_runs
 

@@ -2,7 +2,7 @@
 
 Every trained run's final estimate predicts a validation record (the model
 simulated from rest under the record's inputs) and is scored by the thesis's
-MSE (3-44) and force errors (3-45..3-49) (:mod:`bayes_mr.selection.scores`);
+MSE (3-44) and force errors (3-45..3-49) (:mod:`bayes_mr.scores`);
 the run with the lowest MSE is the trained model. The three identification
 and validation methods of Lund et al. (2020) that the thesis describes:
 
@@ -27,7 +27,7 @@ import xarray as xr
 from ..inference import ukf_kernel as K
 from ..models import Model, get_model
 from ..simulate import OUTPUT_NAMES, Inputs, simulate
-from .scores import Scorer
+from ..scores import Scorer
 from .training import settings_from_json, train
 
 #: Score variables of a validation Dataset (per run).
@@ -209,7 +209,7 @@ class Trial:
     theta : dict
         That run's final estimate, name → value [SI] (free parameters).
     scores : dict
-        Its scores as :func:`~bayes_mr.selection.scores.score` returns them
+        Its scores as :func:`~bayes_mr.scores.score` returns them
         (``mse``, ``force_errors``, ``force_nrmse``, ``n``), combined over the
         validation records for method 3.
     """

@@ -30,10 +30,10 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..data.derive import smooth_velocity
-from ..data.schema import OUTPUTS
-from ..likelihood import channel_noise
-from ..metrics import force_errors, force_nrmse, mse
+from .data.derive import smooth_velocity
+from .data.schema import OUTPUTS
+from .likelihood import channel_noise
+from .metrics import force_errors, force_nrmse, mse
 
 
 def _bridged(x: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -1,0 +1,216 @@
+"""emcee posterior: recovery of a known Gaussian, determinism, checkpoint/resume, results schema."""
+
+import numpy as np
+import pytest
+
+from bayes_mr.inference.crosscheck import ukf_vs_mcmc
+from bayes_mr.inference.mcmc import (
+    MCMCSettings,
+    fit_mcmc,
+    initial_walkers,
+    integrated_times,
+    sample,
+    to_inference_data,
+)
+
+
+def correlated_gaussian(d, seed):
+    """Mean, covariance (scales 1e-2 … 10, correlations up to ~0.8) and its vectorised log-density."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((d, d))
+    C = A @ A.T + 0.3 * np.eye(d)
+    s = np.sqrt(np.diag(C))
+    scales = np.logspace(-2, 1, d)
+    C = C / np.outer(s, s) * np.outer(scales, scales)
+    mu = rng.standard_normal(d) * scales
+    P = np.linalg.inv(C)
+
+    def log_prob(X):
+        r = np.atleast_2d(X) - mu
+        return -0.5 * np.einsum("bi,ij,bj->b", r, P, r)
+
+    return mu, C, P, log_prob
+
+
+def chi2_z(result, mu, P):
+    """(mean of (x−μ)ᵀP(x−μ) − d) / its MCSE: zero-mean unit-SD when the chain's spread is right."""
+    post = result.chain[result.burn:]
+    r = post - mu
+    q = np.einsum("nwi,ij,nwj->nw", r, P, r)
+    tau = float(integrated_times(q[:, :, None])[0])
+    mcse = q.std(ddof=1) * np.sqrt(tau / q.size)
+    return (q.mean() - mu.size) / mcse
+
+
+def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
+    """5-d, scales over three decades, strong correlations; start off-centre and too wide.
+
+    |mean − truth|/MCSE < 2.33 per coordinate (MCSE = SD/√ESS), R-hat < 1.01,
+    and the second moment right too: E[(x−μ)ᵀP(x−μ)] = d within 3 MCSE
+    (a move that samples the wrong spread keeps the mean right — emcee
+    3.1.6's snooker does exactly that, see the next test).
+    """
+    mu, C, P, log_prob = correlated_gaussian(5, seed=1)
+    res = sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=7, progress=False))
+    assert res.converged
+    assert res.chain.shape[1:] == (20, 5)
+    assert res.n_steps - res.burn >= 50 * res.tau.max()
+    z = (res.mean() - mu) / res.mcse()
+    assert np.all(np.abs(z) < 2.33), z
+    assert np.all(res.rhat < 1.01), res.rhat
+    assert abs(chi2_z(res, mu, P)) < 3.0
+    assert 0.15 < res.acceptance.mean() < 0.6
+
+
+def test_emcee_3_1_6_snooker_is_biased_and_ours_is_not():
+    """emcee 3.1.6's DESnookerMove under-disperses (dfm/emcee#531); the package's corrected move does not.
+
+    If a newer emcee fixes its move, the first assertion fails: then the local
+    correction (``mcmc.Snooker``) can go.
+    """
+    # unit scales: emcee's step grows with the distance |s − z| (its bug breaks affine invariance),
+    # so its bias depends on the target's scale; here it is plain
+    rng = np.random.default_rng(2)
+    A = rng.standard_normal((4, 4))
+    C = A @ A.T / 4 + 0.2 * np.eye(4)
+    mu, P = rng.standard_normal(4), np.linalg.inv(C)
+
+    def log_prob(X):
+        r = np.atleast_2d(X) - mu
+        return -0.5 * np.einsum("bi,ij,bj->b", r, P, r)
+
+    base = {"seed": 5, "progress": False, "rhat_max": 10.0, "check_every": 100, "max_steps": 3000}
+    theirs = sample(log_prob, mu, C, MCMCSettings(moves=(("emcee_snooker", 1.0),), **base))
+    ours = sample(log_prob, mu, C, MCMCSettings(moves=(("snooker", 1.0),), **base))
+    assert chi2_z(theirs, mu, P) < -8.0
+    assert abs(chi2_z(ours, mu, P)) < 3.0
+
+
+SHORT = {"progress": False, "max_steps": 300, "check_every": 100}
+
+
+def test_same_seed_gives_the_same_chain_bit_for_bit():
+    mu, C, _, log_prob = correlated_gaussian(4, seed=3)
+    a = sample(log_prob, mu, C, MCMCSettings(seed=11, **SHORT))
+    b = sample(log_prob, mu, C, MCMCSettings(seed=11, **SHORT))
+    c = sample(log_prob, mu, C, MCMCSettings(seed=12, **SHORT))
+    assert np.array_equal(a.chain, b.chain) and np.array_equal(a.log_prob, b.log_prob)
+    assert a.seed_entropy == b.seed_entropy == "11"
+    assert not np.array_equal(a.chain, c.chain)
+
+
+class Interrupt(Exception):
+    pass
+
+
+def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path):
+    """The log-density raises mid-run (a killed job); resuming from the HDF5 checkpoint finishes it.
+
+    The resumed chain, its diagnostics and the stopping step equal those of a
+    run that was never interrupted — the backend carries emcee's random state.
+    """
+    mu, C, _, log_prob = correlated_gaussian(4, seed=4)
+    settings = {"seed": 5, "progress": False, "check_every": 100, "min_tau_multiple": 20.0, "rhat_max": 1.05}
+    whole = sample(log_prob, mu, C, MCMCSettings(backend=tmp_path / "whole.h5", **settings))
+
+    calls = {"n": 0}
+
+    def flaky(X):
+        calls["n"] += 1
+        if calls["n"] == 400:  # 2 (DE) or 4 (snooker) calls per step: dies off the check grid
+            raise Interrupt
+        return log_prob(X)
+
+    path = tmp_path / "part.h5"
+    with pytest.raises(Interrupt):
+        sample(flaky, mu, C, MCMCSettings(backend=path, **settings))
+    import emcee
+
+    stopped = emcee.backends.HDFBackend(str(path), read_only=True).iteration
+    assert 100 < stopped < whole.n_steps and stopped % 100 != 0
+    resumed = sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **settings))
+    assert np.array_equal(resumed.chain, whole.chain)
+    assert np.array_equal(resumed.log_prob, whole.log_prob)
+    assert (resumed.burn, resumed.converged) == (whole.burn, whole.converged)
+    np.testing.assert_array_equal(resumed.tau, whole.tau)
+    with pytest.raises(ValueError, match="seed"):
+        sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **{**settings, "seed": 6}))
+
+
+def test_walkers_start_only_where_the_density_is_finite():
+    def half_space(X):
+        X = np.atleast_2d(X)
+        return np.where(X[:, 0] > 0, -0.5 * np.sum(X * X, axis=1), -np.inf)
+
+    coords, lp = initial_walkers(half_space, np.zeros(3), np.eye(3), 16, np.random.default_rng(0))
+    assert np.all(coords[:, 0] > 0) and np.all(np.isfinite(lp))
+    with pytest.raises(RuntimeError, match="prior box"):
+        initial_walkers(half_space, np.array([-50.0, 0, 0]), np.eye(3), 16, np.random.default_rng(0))
+
+
+def test_walker_count_rules():
+    assert MCMCSettings().walkers(6) == 24
+    assert MCMCSettings().walkers(1) == 4
+    with pytest.raises(ValueError, match="even"):
+        MCMCSettings(n_walkers=15).walkers(6)
+    with pytest.raises(ValueError, match="2·d"):
+        MCMCSettings(n_walkers=12).walkers(6)
+
+
+# --- the package's posterior and its results -------------------------------------------
+
+def test_fit_mcmc_result_in_the_package_schema(tmp_path):
+    """A short dahl posterior → InferenceData with every group, SPEC summary keys, and a netCDF round trip."""
+    from test_ukf import structure_record
+
+    from bayes_mr import results
+    from bayes_mr.inference.evidence import laplace_evidence
+    from bayes_mr.inference.lsq import fit_lsq
+    from bayes_mr.likelihood import OutputError
+
+    rec, _theta = structure_record("dahl", {}, n=1500, seed=3, rms=0.6, process=False)
+    lik = OutputError("dahl", rec)
+    lsq = fit_lsq(lik)
+    res = fit_mcmc(lik, lsq=lsq, settings=MCMCSettings(seed=0, progress=False, max_steps=200, check_every=100))
+    assert res.chain.shape == (200, 24, 6) and not res.converged
+    idata = to_inference_data(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)})
+    post = idata.posterior
+    assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
+    assert post.sizes["chain"] == 24
+    ll = idata.log_likelihood
+    assert ll.sizes["chain"] * ll.sizes["draw"] <= 200 and ll.sizes["obs"] <= 2000
+    assert set(ll.data_vars) == {"displacement", "acceleration"}
+    assert idata.posterior_predictive.sizes["draw"] <= 20
+    assert idata.sample_stats["lp"].shape == (24, post.sizes["draw"])
+    assert len(idata.sample_stats.attrs["rhat"]) == 6
+    s = results.summary_of(idata)
+    assert s.engine == "mcmc" and s.log_evidence == pytest.approx(lsq.log_evidence)
+    assert s.extra["evidence_route"] == "laplace"
+    assert s.params["k"] == pytest.approx(float(post["k"].mean()))
+    assert 150 < s.mse < 250  # the maximum-posterior point fits to the noise (≈ 200 = 100 per channel)
+    path = results.save(idata, tmp_path / "fit.nc")
+    back = results.load(path)
+    assert results.point_of(back) == pytest.approx(results.point_of(idata))
+    np.testing.assert_array_equal(back["mcmc_diagnostics"]["tau"].values, res.tau)
+
+
+def test_crosscheck_z_scores_in_phi_and_theta():
+    """Against draws of a known Gaussian: z and SD ratio equal their definitions; θ moments log-normal."""
+    from bayes_mr.models.params import Coordinates, ParamSpec
+
+    coords = Coordinates.build((ParamSpec("a", "N", "", 1.0), ParamSpec("b", "m", "", 1.0, positive=False)),
+                               {"a": (1.0, 100.0), "b": (-1.0, 1.0)})
+    rng = np.random.default_rng(0)
+    m_true, sd_true = np.array([2.0, 0.3]), np.array([0.1, 0.05])
+    draws = m_true + sd_true * rng.standard_normal((400_000, 2))
+    ukf_mean = m_true + np.array([0.3, 0.0]) * np.sqrt(sd_true**2 + (2 * sd_true) ** 2)
+    ukf_cov = np.diag((2 * sd_true) ** 2)
+    ds = ukf_vs_mcmc(ukf_mean, ukf_cov, draws, coords=coords)
+    np.testing.assert_allclose(ds["z_phi"].values, [0.3, 0.0], atol=0.01)
+    np.testing.assert_allclose(ds["sd_ratio_phi"].values, [2.0, 2.0], rtol=0.01)
+    # θ of the log parameter a: φ = ln(s·a), s = 1; draws mapped vs the exact log-normal moments
+    th = coords.to_theta(draws)
+    assert ds["mean_mcmc_theta"].values[0] == pytest.approx(th[:, 0].mean())
+    v = (2 * sd_true[0]) ** 2
+    assert ds["mean_ukf_theta"].values[0] == pytest.approx(np.exp(ukf_mean[0] + v / 2))
+    assert ds["sd_ukf_theta"].values[1] == pytest.approx(2 * sd_true[1] / coords.scale[1])
