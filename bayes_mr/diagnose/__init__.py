@@ -1,0 +1,263 @@
+"""Diagnose a model on measured data: residual → cause → extension → gain.
+
+>>> from bayes_mr.data import load_packaged
+>>> from bayes_mr.diagnose import diagnose
+>>> report = diagnose(load_packaged(), out_dir="results/diagnose")   # doctest: +SKIP
+>>> report["cause"], report["gain"]["mse_ratio"]                      # doctest: +SKIP
+
+1. **Show what is wrong.** Fit the baseline (given, or the form with the
+   highest Laplace evidence) by output-error least squares, and view the
+   residual of every measured channel against time, displacement, velocity,
+   amplitude envelope and voltage, its whiteness and its lag
+   (:mod:`.residuals`).
+2. **Name the cause.** Fit every applicable effect of the SPEC as an
+   extension of the baseline and score it by an autocorrelation-corrected
+   log Bayes factor; add effects greedily while one passes the calibrated
+   threshold (:mod:`.screen`). No effect passing is the answer ``none``.
+3. **Extend and measure.** Report the extended model's MSE ratio and
+   evidence gain, and with ``validate`` its error ratio on another record
+   (thesis method 2); write the SPEC's JSON and, with ``out_dir``, a Markdown
+   report with before/after figures (:mod:`.report`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time as _time
+from pathlib import Path
+
+import xarray as xr
+
+from ..inference.lsq import LSQSettings
+from ..models import NONE, Model, get_model
+from .fits import Fit, fit_model, predict, record_mse
+from .residuals import residual_views, varying_voltage
+from .screen import THRESHOLD, Candidate, forward_select
+
+__all__ = ["FORMS", "THRESHOLD", "diagnose", "select_baseline"]
+
+#: Forms compared when no baseline is given (spencer only for device tests with a varying voltage).
+FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
+
+
+def _say(progress):
+    if callable(progress):
+        return progress
+    if progress:
+        return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
+    return lambda msg: None
+
+
+def select_baseline(record: xr.Dataset, forms: tuple[str, ...] | None = None, *,
+                    settings: LSQSettings = LSQSettings(), progress=None) -> tuple[Fit, list[dict]]:
+    """Fit each form and keep the one with the highest Laplace evidence.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+    forms : tuple of str, optional
+        Default :data:`FORMS`, plus ``spencer`` for a device test whose
+        voltage varies.
+
+    Returns
+    -------
+    Fit, list of dict
+        The selected fit and one row per form (``model``, ``log_evidence``,
+        ``mse``, or ``error``).
+    """
+    say = _say(progress)
+    if forms is None:
+        forms = FORMS + (("spencer",) if record.attrs["kind"] == "device" and varying_voltage(record) else ())
+    fits, rows = [], []
+    for name in forms:
+        t0 = _time.perf_counter()
+        try:
+            f = fit_model(record, name, settings)
+        except (RuntimeError, ValueError) as exc:
+            rows.append({"model": name, "log_evidence": None, "mse": None, "error": str(exc)})
+            say(f"baseline {name}: failed ({exc})")
+            continue
+        fits.append(f)
+        rows.append({"model": name, "log_evidence": _num(f.result.log_evidence), "mse": _num(f.mse),
+                     "wall_s": round(_time.perf_counter() - t0, 2)})
+        say(f"baseline {name}: ln Z {f.result.log_evidence:.6g}, MSE {f.mse:.4g}")
+    if not fits:
+        raise RuntimeError(f"{record.attrs.get('source', 'record')}: no model form could be fitted")
+    best = max(fits, key=lambda f: f.result.log_evidence if math.isfinite(f.result.log_evidence) else -math.inf)
+    return best, rows
+
+
+def diagnose(
+    record: xr.Dataset,
+    model: Model | str | None = None,
+    *,
+    validate: xr.Dataset | str | os.PathLike | None = None,
+    out_dir: str | os.PathLike | None = None,
+    seed: int = 0,
+    progress=True,
+    threshold: float = THRESHOLD,
+    max_effects: int = 3,
+    settings: LSQSettings | None = None,
+) -> dict:
+    """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+        A record in the package schema (structure or device test; masked
+        samples are left out of every fit and score).
+    model : Model or str, optional
+        Baseline, e.g. ``"dahl"`` or ``"lugre+force_offset"``. Default: the
+        form with the highest evidence (:func:`select_baseline`).
+    validate : Dataset or path, optional
+        Another record of the same kind: the baseline and the extended model,
+        as fitted, predict it (thesis method 2).
+    out_dir : path, optional
+        Write ``diagnose.md``, ``diagnose.json`` and PNG figures here.
+    seed : int
+        Seed of the least-squares candidates and of the effects' starts.
+    progress : bool or callable
+        Report each stage on stderr (or to the callable).
+    threshold : float
+        Score an effect must exceed to be named (:data:`THRESHOLD`).
+    max_effects : int
+        Most effects added by forward selection.
+    settings : LSQSettings, optional
+        Settings of the baseline fits.
+
+    Returns
+    -------
+    dict
+        The SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
+        ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate
+        ranked, ``{name, score, ...}``), ``extended`` {model, mse,
+        log_evidence}, ``gain`` {mse_ratio, delta_log_evidence,
+        validation_mse_ratio} — and ``effects`` (all effects named, in the
+        order they were added), ``selection`` (each forward-selection round),
+        ``masked``, ``threshold``, ``residuals`` (before/after summaries),
+        ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``.
+    """
+    t0 = _time.perf_counter()
+    say = _say(progress)
+    settings = settings or LSQSettings(seed=seed)
+    kind = record.attrs["kind"]
+    if kind == "structure" and "mass" not in record.attrs:
+        raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
+    if model is None:
+        base, baselines = select_baseline(record, settings=settings, progress=say)
+    else:
+        base = fit_model(record, get_model(model), settings)
+        baselines = None
+    say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
+    before = residual_views(record, base.predicted)
+    selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
+                                      progress=say)
+    ext = selected[-1].fit if selected else base
+    after = residual_views(record, ext.predicted) if selected else before
+    names = [c.name for c in selected]
+    say(f"named: {', '.join(names) or NONE}")
+
+    validation = None
+    if validate is not None:
+        validation = _validate(base, ext, validate, record)
+
+    out = {
+        "record": {"source": str(record.attrs.get("source", "")), "kind": kind, "samples": int(record.sizes["time"]),
+                   "fs": float(record.attrs["fs"]), "duration_s": float(record.sizes["time"] / record.attrs["fs"])},
+        "masked": int((~record["valid"].values.astype(bool)).sum()),
+        "baseline": _fit_dict(base),
+        "baselines": baselines,
+        "cause": names[0] if names else NONE,
+        "effects": names,
+        "causes": _causes(rounds, selected),
+        "selection": [dict(round=i + 1, **c.to_dict()) for i, c in enumerate(selected)],
+        "extended": _fit_dict(ext),
+        "gain": {
+            "mse_ratio": _num(ext.mse / base.mse),
+            "delta_log_evidence": _num(ext.result.log_evidence - base.result.log_evidence),
+            "delta_score": _num(sum(c.score for c in selected)) if selected else 0.0,
+            "validation_mse_ratio": validation["mse_ratio"] if validation else None,
+        },
+        "validation": validation,
+        "threshold": threshold,
+        "residuals": {"before": before.summary(), "after": after.summary()},
+        "seed": seed,
+    }
+    if out_dir is not None:
+        from .report import write_report
+
+        out["wall_s"] = round(_time.perf_counter() - t0, 2)
+        paths = write_report(out, record, base, ext, before, after, rounds, Path(out_dir))
+        out["figures"] = {k: str(v) for k, v in paths.items() if k != "report"}
+        out["report"] = str(paths["report"])
+    out["wall_s"] = round(_time.perf_counter() - t0, 2)
+    if out_dir is not None:
+        import json
+
+        (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
+    return out
+
+
+def _num(v) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _fit_dict(f: Fit) -> dict:
+    out = {"model": f.name, "mse": _num(f.mse), "log_evidence": _num(f.result.log_evidence),
+           "log_likelihood": _num(f.result.log_likelihood),
+           "params": {k: _num(v) for k, v in f.params().items()},
+           "params_sd": {k: _num(v) for k, v in f.result.sd_theta.items()},
+           "sigma": dict(zip(f.lik.channels, map(_num, f.result.sigma)))}
+    delay = f.model.effect("sensor_delay")
+    if delay is not None:
+        out["options"] = {"sensor_delay": {"channel": f.model.delay_channel(f.lik.kind)}}
+    return out
+
+
+def _causes(rounds: list[list[Candidate]], selected: list[Candidate]) -> list[dict]:
+    """Round-one candidates ranked by score; an effect named in a later round
+    carries that round's score too."""
+    if not rounds:
+        return []
+    chosen = {id(c): i for i, c in enumerate(selected)}
+    later = {c.name: (i, c) for i, c in enumerate(selected)}
+    rows = []
+    for c in rounds[0]:
+        row = c.to_dict()
+        row["selected"] = c.name in later
+        if c.name in later and id(c) not in chosen:
+            i, s = later[c.name]
+            if s.channel == c.channel:
+                row["score_when_selected"] = _num(s.score)
+                row["selected_round"] = i + 1
+            else:
+                row["selected"] = False
+        elif id(c) in chosen:
+            row["selected_round"] = chosen[id(c)] + 1
+        rows.append(row)
+    return rows
+
+
+def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> dict:
+    """Errors of the baseline and the extended model, as fitted, on another record."""
+    if not isinstance(validate, xr.Dataset):
+        from ..data import read_record
+
+        validate = read_record(validate, mass=record.attrs.get("mass"))
+    if validate.attrs["kind"] != record.attrs["kind"]:
+        raise ValueError(f"validation record is a {validate.attrs['kind']} test, the record a "
+                         f"{record.attrs['kind']} test")
+    out = {"source": str(validate.attrs.get("source", "")),
+           "masked": int((~validate["valid"].values.astype(bool)).sum())}
+    mses = {}
+    for label, f in (("baseline", base), ("extended", ext)):
+        pred = predict(f.model, validate, f.theta_full)
+        mses[label] = record_mse(validate, pred) if pred is not None else math.inf
+        out[f"{label}_mse"] = _num(mses[label])
+    out["mse_ratio"] = _num(mses["extended"] / mses["baseline"]) if mses["baseline"] > 0 else None
+    return out

@@ -1,0 +1,203 @@
+"""Fits that diagnose needs: a form from scratch, a model warm-started from another.
+
+Both are output-error least squares on :class:`~bayes_mr.likelihood.OutputError`
+with the Laplace evidence of :mod:`bayes_mr.inference.lsq`; a :class:`Fit`
+keeps the likelihood, the optimum, the simulated channels and the record's
+MSE together so that residual views, scores and reports read one object.
+
+A model extended by an effect *nests* its base model (the effect switched off
+— f0 = 0, drift = 0, r_s = 1, c_s → ∞, … — gives the base model back), so
+warm-starting the extension at the base optimum with the effect off, and only
+ever moving downhill, guarantees the extension fits at least as well: a
+gain that is not there cannot come from a poor local optimum of the base
+model, and one that is there is found from the effect's own starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from ..inference.lsq import LSQResult, LSQSettings, _refine, fit_lsq, laplace
+from ..likelihood import OutputError
+from ..models import Model, get_model
+from ..scores import score
+from ..simulate import Inputs, simulate
+
+#: Most residual evaluations of one warm-started refinement.
+MAX_NFEV = 60
+
+
+@dataclass
+class Fit:
+    """A fitted model and what it predicts for the record it was fitted to.
+
+    Attributes
+    ----------
+    model : Model
+    lik : OutputError
+    result : LSQResult
+        Optimum, covariances (iid and autocorrelation-consistent), ln L, ln Z.
+    predicted : dict of str → ndarray, shape (n,)
+        Simulated channels at the optimum (``simulate`` outputs).
+    mse : float
+        Record score (:func:`record_mse`).
+    """
+
+    model: Model
+    lik: OutputError
+    result: LSQResult
+    predicted: dict[str, np.ndarray]
+    mse: float
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self.result.phi
+
+    @property
+    def theta_full(self) -> np.ndarray:
+        """Full parameter vector [SI] (fixed parameters included)."""
+        return self.lik.par.full(self.result.phi)
+
+    def params(self) -> dict[str, float]:
+        """Free and fixed parameters at the optimum, name → value [SI]."""
+        names = self.model.param_names(self.lik.kind)
+        return {n: float(v) for n, v in zip(names, self.theta_full)}
+
+
+def record_mse(record: xr.Dataset, predicted: dict[str, np.ndarray]) -> float:
+    """The record's model-selection score of a prediction (:func:`bayes_mr.scores.score`'s ``mse``).
+
+    Structure test: thesis eq. 3-44 (displacement and acceleration, each over
+    its noise variance). Device test: the same normalisation of the force,
+    100/N Σ (F − F̂)²/σ_F². One definition, so diagnose and ``fit`` report the
+    same number.
+    """
+    return float(score(record, predicted)["mse"])
+
+
+def predict(model: Model, record: xr.Dataset, theta_full: np.ndarray) -> dict[str, np.ndarray] | None:
+    """Simulated channels of ``model`` at full θ under ``record``'s inputs (None if it diverges)."""
+    sim = simulate(model, Inputs.from_record(record), theta_full)
+    if not sim.ok.all():
+        return None
+    return {k: np.asarray(v) for k, v in sim.outputs.items()}
+
+
+def residual_rms(lik: OutputError, phi: np.ndarray) -> np.ndarray:
+    """RMS of each channel's residual at φ over valid samples (the ML noise SD)."""
+    yhat, _ = lik.predict(phi)
+    resid = (lik.y - yhat[0])[lik.valid]
+    return np.maximum(np.sqrt(np.mean(resid**2, axis=0)), 1e-12 * np.std(lik.y[lik.valid], axis=0))
+
+
+def converge(lik: OutputError, phi: np.ndarray, *, refined_at: np.ndarray | None = None, passes: int = 6,
+             max_nfev: int = MAX_NFEV) -> np.ndarray:
+    """Refine φ until it is optimal for channel weights equal to its own residual RMS.
+
+    Least squares with fixed channel weights σ_c, re-weighted by the residual
+    RMS and refined again, is iterated to the maximum of the likelihood with
+    σ_c profiled out (Σ_c −N/2 ln RSS_c). Every fit diagnose compares is taken
+    to that point: a base model stopped one re-weighting short would hand its
+    extensions a likelihood gain that has nothing to do with their effect.
+
+    Parameters
+    ----------
+    lik : OutputError
+    phi : ndarray (p,)
+        Start (an optimum for the weights ``refined_at``, if given).
+    refined_at : ndarray (n_channels,), optional
+        Weights ``phi`` is already optimal for. With one channel the weight
+        does not move the optimum, and nothing more is done.
+    passes : int
+        Most re-weightings.
+    """
+    phi = np.asarray(phi, float)
+    if refined_at is not None and len(lik.channels) == 1:
+        return phi
+    done = refined_at
+    for _ in range(passes):
+        sd = residual_rms(lik, phi)
+        if done is not None and np.max(np.abs(np.log(sd / done))) < 1e-3:
+            break
+        phi = _refine(lik, phi, sd, max_nfev).x
+        done = sd
+    return phi
+
+
+def _finish(lik: OutputError, res: LSQResult, record: xr.Dataset) -> Fit:
+    predicted = predict(lik.model, record, lik.par.full(res.phi))
+    if predicted is None:
+        raise RuntimeError(f"{lik.model.name}: the fitted model diverges on its own record")
+    return Fit(lik.model, lik, res, predicted, record_mse(record, predicted))
+
+
+def fit_model(record: xr.Dataset, model: Model | str, settings: LSQSettings = LSQSettings(),
+              *, progress=None) -> Fit:
+    """Least-squares fit of ``model`` from scratch (convex-screened starts, :func:`fit_lsq`),
+    taken to the profile-likelihood optimum (:func:`converge`)."""
+    lik = OutputError(get_model(model), record)
+    res = fit_lsq(lik, settings, progress=progress)
+    phi = converge(lik, res.phi)
+    return _finish(lik, laplace(lik, phi, starts=res.starts, wall_s=res.wall_s), record)
+
+
+def costs(lik: OutputError, starts: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """Weighted sum of squared residuals Σ ((y − ŷ)/σ_c)² of each start φ (B, p), one batched simulation."""
+    yhat, sim = lik.predict(np.atleast_2d(starts))
+    r = (lik.y[None] - yhat)[:, lik.valid, :] / sd
+    out = np.sum(r * r, axis=(1, 2))
+    return np.where(sim.ok & np.isfinite(out), out, np.inf)
+
+
+def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
+          n_refine: int = 2, max_nfev: int = MAX_NFEV) -> tuple[Fit, list[dict]]:
+    """Fit ``lik``'s model from given starts: screen them by cost, refine the best, Laplace.
+
+    Parameters
+    ----------
+    lik : OutputError
+        Model and record (with any prior-range overrides).
+    starts : ndarray, shape (B, p)
+        Candidate φ of every free parameter (estimation coordinates); the
+        first is always refined (the nested "effect off" start).
+    sd : ndarray, shape (n_channels,)
+        Channel weights of the first refinement (the base fit's residual RMS);
+        the best run is then re-weighted to the maximum-likelihood σ
+        (:func:`converge`).
+    n_refine : int
+        Starts refined by trust-region least squares: the first, and the
+        cheapest others.
+    max_nfev : int
+        Most residual evaluations per refinement.
+
+    Returns
+    -------
+    Fit, list of dict
+        The fit and one record per refined start (initial and final cost).
+    """
+    c = costs(lik, starts, sd)
+    # the first start is refined in any case (diagnose passes the base model's
+    # optimum there, which no extension may end up worse than), then the
+    # cheapest of the others: a weak effect's optimum is often next to a grid
+    # point that costs more than "off" — it must still be explored
+    order = [0] + [int(j) for j in np.argsort(c) if j != 0]
+    runs = []
+    for j in order[:n_refine]:
+        if not np.isfinite(c[j]):
+            continue
+        res = _refine(lik, starts[j], sd, max_nfev)
+        runs.append({"start": int(j), "cost0": float(0.5 * c[j]), "cost": float(res.cost), "phi": res.x,
+                     "nfev": int(res.nfev)})
+    if not runs:
+        raise RuntimeError(f"{lik.model.name}: every start diverged")
+    best = min(runs, key=lambda r: r["cost"])
+    phi = converge(lik, best["phi"], refined_at=sd, max_nfev=max_nfev)
+    res = laplace(lik, phi)
+    return _finish(lik, res, lik.record), [{k: v for k, v in r.items() if k != "phi"} for r in runs]

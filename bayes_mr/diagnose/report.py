@@ -1,0 +1,286 @@
+"""Figures and the Markdown report of a diagnosis (matplotlib, Agg backend).
+
+Everything drawn here was computed before (:mod:`.residuals`, :mod:`.screen`);
+figures are deterministic for a given diagnosis. The figures are drawn
+directly with matplotlib rather than through :mod:`bayes_mr.plots`, which
+sits above diagnose in the package's layering.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+from ..report import fmt  # noqa: E402
+from .fits import Fit  # noqa: E402
+from .residuals import Views  # noqa: E402
+
+#: Most points drawn per line (long records are thinned evenly).
+MAX_POINTS = 20000
+#: Hysteresis window length [s] (or a fifth of the record if shorter).
+LOOP_WINDOW_S = 2.0
+UNITS = {"displacement": "m", "acceleration": "m/s²", "force": "N", "time": "s", "velocity": "m/s",
+         "envelope": "m", "voltage": "V"}
+
+
+def _save(fig, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100, bbox_inches="tight", metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def _thin(n: int) -> slice:
+    return slice(None, None, max(1, n // MAX_POINTS))
+
+
+def _restoring(record: xr.Dataset, channels: dict[str, np.ndarray] | None) -> np.ndarray:
+    """Force the loops show: device — force; structure — restoring force −m·(absolute acceleration)."""
+    src = record if channels is None else channels
+    if record.attrs["kind"] == "device":
+        return np.asarray(src["force"] if channels else record["force"].values)
+    acc = np.asarray(src["acceleration"] if channels else record["acceleration"].values)
+    return -float(record.attrs["mass"]) * acc
+
+
+def _worst_window(record: xr.Dataset, r: np.ndarray) -> slice:
+    """The window where the baseline's residual RMS is largest (where the model fails most)."""
+    n = record.sizes["time"]
+    fs = float(record.attrs["fs"])
+    w = int(min(LOOP_WINDOW_S * fs, max(n // 5, 2)))
+    power = np.convolve(r * r, np.ones(w), mode="valid")
+    i = int(np.argmax(power))
+    return slice(i, i + w)
+
+
+def hysteresis_figure(record: xr.Dataset, base: Fit, ext: Fit, window: slice):
+    """Force–displacement loops: measured against the baseline (left) and the extended model (right)."""
+    x = record["displacement"].values[window] * 1e3
+    f = _restoring(record, None)[window]
+    label = "force [N]" if record.attrs["kind"] == "device" else "restoring force −m·a [N]"
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    t = record["time"].values[window]
+    for ax, fit, title in ((axes[0], base, "before"), (axes[1], ext, "after")):
+        ax.plot(x, f, color="0.55", lw=1.2, label="measured")
+        ax.plot(x, _restoring(record, fit.predicted)[window], color="tab:red", lw=0.8, label=fit.name)
+        ax.set_title(f"{title}: {fit.name}  ({t[0]:.2f}–{t[-1]:.2f} s)", fontsize=9)
+        ax.set_xlabel("displacement [mm]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel(label)
+    fig.tight_layout()
+    return fig
+
+
+def residual_time_figure(record: xr.Dataset, before: Views, after: Views, base: Fit, ext: Fit):
+    """Residual of each measured channel against time, before and after."""
+    chans = list(before.channels)
+    fig, axes = plt.subplots(len(chans), 1, figsize=(9, 2.2 * len(chans)), sharex=True, squeeze=False)
+    t = record["time"].values
+    sl = _thin(t.size)
+    for ax, c in zip(axes[:, 0], chans):
+        ax.plot(t[sl], before.channels[c].residual[sl], lw=0.6, color="tab:blue", label=f"before ({base.name})")
+        if after is not before:
+            ax.plot(t[sl], after.channels[c].residual[sl], lw=0.6, color="tab:red", alpha=0.8,
+                    label=f"after ({ext.name})")
+        ax.set_ylabel(f"{c} [{UNITS.get(c, '')}]", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title("residual = measured − simulated")
+    fig.tight_layout()
+    return fig
+
+
+def residual_binned_figure(before: Views, after: Views):
+    """Standardised residual against each variable (binned mean ± SD), before and after; η² in titles."""
+    chans = list(before.channels)
+    variables = list(next(iter(before.channels.values())).bins)
+    fig, axes = plt.subplots(len(chans), len(variables), figsize=(2.9 * len(variables), 2.4 * len(chans)),
+                             squeeze=False)
+    for i, c in enumerate(chans):
+        for j, v in enumerate(variables):
+            ax = axes[i, j]
+            for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
+                if views is after and after is before:
+                    continue
+                b = views.channels[c].bins[v]
+                ax.plot(b.center, b.mean, "o-", ms=2, lw=0.9, color=color, label=f"{label} η²={b.eta2:.3f}")
+                ax.fill_between(b.center, b.mean - b.sd, b.mean + b.sd, color=color, alpha=0.12, lw=0)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=6)
+            if i == len(chans) - 1:
+                ax.set_xlabel(f"{v} [{UNITS.get(v, '')}]", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(f"{c} residual / RMS", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def whiteness_figure(before: Views, after: Views, n: int):
+    """Residual autocorrelation of each channel, before and after, with the white-noise band."""
+    chans = list(before.channels)
+    fig, axes = plt.subplots(1, len(chans), figsize=(4 * len(chans), 3), squeeze=False)
+    band = 1.96 / math.sqrt(n)
+    for ax, c in zip(axes[0], chans):
+        for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
+            if views is after and after is before:
+                continue
+            cv = views.channels[c]
+            ax.plot(np.arange(cv.acf.size), cv.acf, color=color, lw=0.9,
+                    label=f"{label}: τ={cv.tau:.1f}, Ljung–Box p={cv.ljung_box_p:.2g}")
+        ax.axhspan(-band, band, color="0.8", alpha=0.5, lw=0)
+        ax.set_title(c, fontsize=9)
+        ax.set_xlabel("lag [samples]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0, 0].set_ylabel("autocorrelation")
+    fig.tight_layout()
+    return fig
+
+
+def crosscorr_figure(before: Views, after: Views):
+    """Cross-correlation of pairs of channels (measured vs simulated), and residual vs input."""
+    pairs = list(before.cross)
+    chans = list(before.input_cross)
+    ncol = max(len(pairs), len(chans), 1)
+    fig, axes = plt.subplots(2, ncol, figsize=(4 * ncol, 5.5), squeeze=False)
+    for ax, key in zip(axes[0], pairs):
+        lags, cm, cs = before.cross[key]
+        ax.plot(lags, cm, color="0.4", lw=1.2, label="measured")
+        ax.plot(lags, cs, color="tab:blue", lw=0.8, label="baseline")
+        if after is not before:
+            ax.plot(lags, after.cross[key][2], color="tab:red", lw=0.8, ls="--", label="extended")
+        ax.set_title(key.replace("~", " vs "), fontsize=9)
+        ax.set_xlabel("lag [samples]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax, c in zip(axes[1], chans):
+        for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
+            if views is after and after is before:
+                continue
+            lags, cc = views.input_cross[c]
+            ax.plot(lags, cc, color=color, lw=0.9, label=f"{label} (lag {views.channels[c].lag_samples:+.2f})")
+        ax.set_title(f"{c} residual vs input", fontsize=9)
+        ax.set_xlabel("lag [samples]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in list(axes[0][len(pairs):]) + list(axes[1][len(chans):]):
+        ax.axis("off")
+    fig.tight_layout()
+    return fig
+
+
+def scores_figure(causes: list[dict], threshold: float):
+    """Round-one score of every candidate effect with the decision threshold."""
+    rows = [c for c in causes if c.get("score") is not None][::-1]
+    fig, ax = plt.subplots(figsize=(6.5, 0.35 * len(rows) + 1.2))
+    labels = [c["name"] + (f" ({c['channel']})" if c.get("channel") else "") for c in rows]
+    values = [c["score"] for c in rows]
+    colors = ["tab:red" if c.get("selected") else "tab:gray" for c in rows]
+    ax.barh(labels, values, color=colors)
+    ax.axvline(threshold, color="k", ls="--", lw=1, label=f"threshold {threshold:g}")
+    ax.set_xscale("symlog", linthresh=10)
+    ax.set_xlabel("score (κ-corrected ln Bayes factor against the baseline)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="x")
+    fig.tight_layout()
+    return fig
+
+
+def _markdown(out: dict, figures: dict[str, Path]) -> str:
+    rec = out["record"]
+    lines = [f"# Diagnosis of `{rec['source']}`", "",
+             f"{rec['kind']} test, {rec['samples']} samples at {rec['fs']:.6g} Hz ({rec['duration_s']:.3g} s); "
+             f"{out['masked']} samples masked by quality control.", ""]
+    named = out["effects"]
+    lines += ["## Verdict", "",
+              f"**Cause: `{out['cause']}`**" + (f" (all named: {', '.join(f'`{n}`' for n in named)})"
+                                               if len(named) > 1 else ""), ""]
+    g = out["gain"]
+    lines += [f"- baseline `{out['baseline']['model']}`: MSE {fmt(out['baseline']['mse'])}, "
+              f"ln Z {fmt(out['baseline']['log_evidence'], 8)}",
+              f"- extended `{out['extended']['model']}`: MSE {fmt(out['extended']['mse'])}, "
+              f"ln Z {fmt(out['extended']['log_evidence'], 8)}",
+              f"- MSE ratio (extended/baseline) {fmt(g['mse_ratio'])}; Δ ln Z (Laplace, iid) "
+              f"{fmt(g['delta_log_evidence'])}; validation MSE ratio {fmt(g['validation_mse_ratio'])}",
+              f"- decision threshold on the score: {fmt(out['threshold'])}; wall time {fmt(out.get('wall_s'))} s", ""]
+    if out.get("baselines"):
+        lines += ["## Baseline chosen by evidence", "", "| model | ln Z (Laplace) | MSE |", "|---|---|---|"]
+        for row in out["baselines"]:
+            lines.append(f"| {row['model']} | {fmt(row['log_evidence'], 8)} | {fmt(row['mse'])} |")
+        lines.append("")
+    lines += ["## Candidate effects (round 1, against the baseline)", "",
+              "score = Δℓ/κ + Occam: Δℓ the log-likelihood gain, κ the variance inflation of correlated "
+              "residuals for the effect's parameters, Occam ≤ 0 their posterior-to-prior volume.", "",
+              "| effect | score | κ | Δℓ | Occam | Δ ln Z (iid) | MSE ratio | parameters | named |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for c in out["causes"]:
+        name = c["name"] + (f" ({c['channel']})" if c.get("channel") else "")
+        params = ", ".join(f"{k}={fmt(v)}" for k, v in c.get("params", {}).items())
+        lines.append(f"| {name} | {fmt(c['score'])} | {fmt(c['kappa'])} | {fmt(c['delta_loglik'])} | "
+                     f"{fmt(c['occam'])} | {fmt(c['delta_log_evidence'])} | {fmt(c['mse_ratio'])} | {params} | "
+                     f"{'yes' if c.get('selected') else ''} |")
+    if len(out["selection"]) > 1:
+        lines += ["", "Forward selection: " + " → ".join(
+            f"`{s['name']}` (score {fmt(s['score'])} in round {s['round']})" for s in out["selection"])]
+    lines += ["", "## Residuals", "",
+              "η² = share of the residual variance explained by its binned dependence on each variable; "
+              "τ = integrated autocorrelation time [samples]; lag = samples by which the measured channel "
+              "trails its simulation.", "",
+              "| channel | | RMS | η² time | η² displacement | η² velocity | η² envelope | η² voltage | τ | "
+              "Ljung–Box p | lag |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for stage in ("before", "after"):
+        for c, s in out["residuals"][stage].items():
+            e = s["eta2"]
+            lines.append(f"| {c} | {stage} | {fmt(s['rms'])} | {fmt(e.get('time'))} | {fmt(e.get('displacement'))} | "
+                         f"{fmt(e.get('velocity'))} | {fmt(e.get('envelope'))} | {fmt(e.get('voltage', float('nan')))} | "
+                         f"{fmt(s['tau_samples'])} | {fmt(s['ljung_box_p'])} | {fmt(s['lag_samples'])} |")
+    if out.get("validation"):
+        v = out["validation"]
+        lines += ["", "## Validation (method 2)", "",
+                  f"On `{v['source']}`: baseline MSE {fmt(v['baseline_mse'])}, extended MSE {fmt(v['extended_mse'])}, "
+                  f"ratio {fmt(v['mse_ratio'])}."]
+    titles = {"hysteresis": "Loops where the baseline fails most, before and after",
+              "residuals_time": "Residuals against time", "residuals_binned": "Residuals against the variables",
+              "whiteness": "Whiteness of the residuals", "crosscorr": "Cross-correlations",
+              "scores": "Scores of the candidate effects"}
+    lines += ["", "## Figures", ""]
+    for key, path in figures.items():
+        lines += [f"### {titles.get(key, key)}", "", f"![{key}]({path.name})", ""]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before: Views, after: Views,
+                 rounds, out_dir: Path) -> dict[str, Path]:
+    """Write the figures and ``diagnose.md`` into ``out_dir``; return name → path (``report`` included)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    power = sum((cv.residual / cv.sigma) ** 2 for cv in before.channels.values() if cv.sigma > 0)
+    window = _worst_window(record, np.sqrt(power))
+    figures = {
+        "hysteresis": _save(hysteresis_figure(record, base, ext, window), out_dir / "hysteresis.png"),
+        "residuals_time": _save(residual_time_figure(record, before, after, base, ext), out_dir / "residuals_time.png"),
+        "residuals_binned": _save(residual_binned_figure(before, after), out_dir / "residuals_binned.png"),
+        "whiteness": _save(whiteness_figure(before, after, record.sizes["time"]), out_dir / "whiteness.png"),
+        "crosscorr": _save(crosscorr_figure(before, after), out_dir / "crosscorr.png"),
+    }
+    if out["causes"]:
+        figures["scores"] = _save(scores_figure(out["causes"], out["threshold"]), out_dir / "scores.png")
+    report = out_dir / "diagnose.md"
+    report.write_text(_markdown(out, figures))
+    return {**figures, "report": report}
+
+
+def dumps(out: dict) -> str:
+    """The diagnosis as JSON text (non-finite numbers as null)."""
+    return json.dumps(out, indent=2, allow_nan=False)
