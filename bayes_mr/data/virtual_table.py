@@ -22,7 +22,6 @@ acceleration only, as the thesis did.
 
 from __future__ import annotations
 
-import numpy as np
 import xarray as xr
 from scipy import signal
 
