@@ -200,8 +200,9 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
     t0 = _time.perf_counter()
     chain = fit_mcmc(lik, lsq=res, settings=MCMCSettings(seed=seed, progress=False))
     mcmc_s = _time.perf_counter() - t0
-    return {"lsq_s": lsq_s, "mcmc_s": mcmc_s, "mcmc_steps": int(getattr(chain, "n_steps", 0)),
-            "mcmc_record": f"dahl, {duration:g} s at {fs:g} Hz"}
+    return {"lsq_s": lsq_s, "mcmc_s": mcmc_s, "mcmc_steps": chain.n_steps, "mcmc_walkers": chain.n_walkers,
+            "mcmc_converged": chain.converged, "mcmc_tau_max": float(chain.tau.max()),
+            "mcmc_rhat_max": float(chain.rhat.max()), "mcmc_record": f"dahl, {duration:g} s at {fs:g} Hz"}
 
 
 def run_bench(seed: int = 0, progress=print) -> dict:
@@ -231,7 +232,9 @@ def bench_markdown(r: dict) -> str:
         ("trained fraction (thesis: 32–42 %)", f"{100 * r['trained_fraction']:.0f} %"),
         ("best trained run, largest parameter error", f"{100 * worst:.2f} %"),
         (f"least squares, {r['mcmc_record']}", f"{r['lsq_s']:.1f} s"),
-        (f"emcee posterior (≥ 50 τ), {r['mcmc_record']}", f"{r['mcmc_s']:.0f} s"),
+        (f"emcee posterior, {r['mcmc_record']}: {r['mcmc_steps']} steps × {r['mcmc_walkers']} walkers, "
+         f"τ_max {r['mcmc_tau_max']:.0f}, R-hat_max {r['mcmc_rhat_max']:.3f}"
+         f"{'' if r['mcmc_converged'] else ' (NOT converged)'}", f"{r['mcmc_s']:.0f} s"),
     ]
     lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
     lines.append("")

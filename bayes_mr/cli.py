@@ -151,6 +151,50 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    from .compare import compare, table
+    from .identify import UKF
+    from .report import markdown_table
+
+    rec = _read(args.data, args)
+    other = _read(args.validate, args) if args.validate else None
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    engines = [e.strip() for e in args.engines.split(",") if e.strip()]
+    estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else None
+    out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
+                  progress=_progress(not args.quiet), out_dir=args.out, estimators=estimators)
+    out.pop("idata")
+    print(markdown_table(table(out)), file=sys.stderr)
+    if out["selected"]:
+        print(f"selected by {out['evidence_route']} evidence: {out['selected']}", file=sys.stderr)
+    _write_json(out, args.json)
+    return 0
+
+
+def cmd_diagnose(args) -> int:
+    from .diagnose import diagnose
+
+    rec = _read(args.data, args)
+    other = _read(args.validate, args) if args.validate else None
+    out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
+                   progress=_progress(not args.quiet))
+    print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
+          f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
+          file=sys.stderr)
+    _write_json(out, args.json)
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .mainjob import run
+
+    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, readme=not args.no_readme)
+    print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)
+    if args.json:
+        _write_json(summary, args.json)
+    return 0
+
+
 def studies_dir() -> Path:
     """The ``studies/`` folder of the source tree this package runs from."""
     return Path(__file__).resolve().parents[1] / "studies"
@@ -196,6 +240,9 @@ VERBS = {
     "simulate": cmd_simulate,
     "fit": cmd_fit,
     "validate": cmd_validate,
+    "compare": cmd_compare,
+    "diagnose": cmd_diagnose,
+    "run": cmd_run,
     "study": cmd_study,
     "bench": cmd_bench,
 }
@@ -271,6 +318,45 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", help="the other record")
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
     _common_data_flags(p)
+
+    p = sub.add_parser("compare", help="fit several models with several engines and compare them",
+                       description="Models × engines on one record: parameters with uncertainty, MSE, force "
+                                   "errors, log evidence and Bayes factors; the model is selected by evidence "
+                                   "(TI with mcmc, else Laplace with lsq, else the UKF's), MSE beside it.")
+    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("--models", required=True, help=f"comma-separated FORM[+EFFECT...]; forms: {forms}")
+    p.add_argument("--engines", default="lsq,mcmc,ukf", help="comma-separated subset of ukf,mcmc,lsq")
+    p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
+    p.add_argument("--ukf-lhs", type=int, metavar="N",
+                   help="Latin-hypercube priors per index of dispersion for the UKF (default 10: 100 priors)")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--out", metavar="DIR", help="also write every fit as netCDF and the table as CSV here")
+    p.add_argument("--json", metavar="OUT.json", help="write the comparison here (default: stdout)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    _common_data_flags(p)
+
+    p = sub.add_parser("diagnose", help="what the model gets wrong, why, and what extending it gains",
+                       description=f"Fit the baseline, look at its residuals, score every effect ({effects}) "
+                                   "as an extension, refit the named one(s) and report the gain.")
+    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
+    p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--out", metavar="DIR", help="write the Markdown report and figures here")
+    p.add_argument("--json", metavar="REPORT.json", help="write the report here (default: stdout)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    _common_data_flags(p)
+
+    p = sub.add_parser("run", help="the main job on the packaged measured MR damper record (make run)",
+                       description="Every form × estimator on part A of the measured damper record, validated on "
+                                   "part B; Spencer (1997)'s published parameters beside; diagnosis of the selected "
+                                   "model; the virtual shake table. Writes OUT/report.md, CSV tables, netCDF fits.")
+    p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results)")
+    p.add_argument("--quick", action="store_true", help="a minute-long pass on a short window")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--json", metavar="OUT.json", help="also write the summary here")
+    p.add_argument("--no-readme", action="store_true", help="do not update README.md's run section")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
 
     p = sub.add_parser("study", help="run one study of studies/ (thesis reproductions and extensions)",
                        description="Run a study script of the studies/ folder; `bayes-mr study list` lists them.")

@@ -97,7 +97,10 @@ def lsq_inference_data(lik: OutputError, res: LSQResult, record: xr.Dataset, *, 
     """InferenceData of a least-squares fit: Laplace draws of φ mapped to θ."""
     rng = np.random.default_rng(seed)
     coords = lik.par.coords
+    # the prior is uniform on the φ box: the Laplace posterior is the Gaussian truncated to it
+    # (an optimum on a bound with a huge SD would otherwise map to θ = inf)
     draws_phi = rng.multivariate_normal(res.phi, res.cov_phi, size=n_draws, method="eigh")
+    draws_phi = np.clip(draws_phi, lik.phi_lo, lik.phi_hi)
     draws = coords.to_theta(draws_phi)[None]
     point = coords.to_theta(res.phi)
     theta = dict(zip(coords.names, point))

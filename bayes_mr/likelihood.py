@@ -261,8 +261,10 @@ class OutputError:
         """
         phi, sigma = self.split(x)
         yhat, sim = self.predict(phi)
-        r = (self.y[None] - yhat) / sigma[:, None, :]
-        terms = -0.5 * r * r - np.log(sigma)[:, None, :] - 0.5 * LOG_2PI
+        # a simulation that blew up overflows here; its total is set to −inf below
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = (self.y[None] - yhat) / sigma[:, None, :]
+            terms = -0.5 * r * r - np.log(sigma)[:, None, :] - 0.5 * LOG_2PI
         terms[:, ~self.valid, :] = 0.0
         total = terms.sum(axis=(1, 2))
         total = np.where(sim.ok & np.isfinite(total), total, -np.inf)

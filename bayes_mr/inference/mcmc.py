@@ -320,6 +320,10 @@ def _seeds(seed) -> tuple[np.random.SeedSequence, np.random.Generator, dict]:
     return seq, np.random.default_rng(init_seq), rs.get_state()
 
 
+#: Each redraw of the walkers that fell outside the support narrows their cloud by this factor.
+SHRINK = 0.8
+
+
 def initial_walkers(
     log_prob: LogDensity,
     center: np.ndarray,
@@ -330,6 +334,10 @@ def initial_walkers(
     max_rounds: int = 50,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Walkers drawn from N(center, cov), redrawn until the log-density is finite.
+
+    A walker whose draw has no finite log-density is drawn again from a cloud
+    narrowed by :data:`SHRINK` per round, so a centre at the edge of the
+    prior box (an optimum on a bound) still yields a full ensemble.
 
     Returns
     -------
@@ -352,8 +360,9 @@ def initial_walkers(
     coords = np.empty((n_walkers, d))
     lp = np.full(n_walkers, -np.inf)
     todo = np.arange(n_walkers)
-    for _ in range(max_rounds):
-        x = center + rng.standard_normal((todo.size, d)) @ L.T
+    for r in range(max_rounds):
+        # a cloud that overhangs the prior box (an optimum at its edge) is drawn again, narrower
+        x = center + SHRINK**r * rng.standard_normal((todo.size, d)) @ L.T
         val = np.asarray(log_prob(x), float)
         ok = np.isfinite(val)
         coords[todo[ok]] = x[ok]

@@ -1,0 +1,192 @@
+"""Compare models × engines on one record: parameters, errors, evidence, Bayes factors.
+
+>>> from bayes_mr.compare import compare
+>>> out = compare(record, ["dahl", "lugre"], engines=("lsq", "mcmc"))   # doctest: +SKIP
+>>> out["selected"], out["bayes_factors"]                              # doctest: +SKIP
+
+Every (model, engine) pair is fitted with :class:`bayes_mr.identify.Identify`
+and stored as InferenceData; one row per pair carries the ``fit`` JSON keys.
+A fit that fails (a model that diverges everywhere, a filter that loses every
+run) is a row with ``error`` set, never the end of the comparison.
+
+Selection is by model evidence, one route for every model so the numbers are
+comparable: thermodynamic integration (``mcmc`` engine) when every model has
+an MCMC row, else the Laplace evidence of least squares (``lsq``), else the
+UKF's innovation likelihood of its best run (``ukf``; the thesis ranked by
+MSE, which is shown beside). ``bayes_factors`` are ln Z(selected) − ln Z(model)
+on that route. With ``validate`` every fit also predicts another record
+(thesis method 2) and the row carries its scores. With both ``ukf`` and
+``mcmc`` run, ``crosscheck`` holds the z-scores of the UKF estimates against
+the MCMC posterior (:mod:`bayes_mr.inference.crosscheck`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time as _time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from . import results
+from .identify import Identify, engine, validate as validate_fit
+from .models import get_model
+
+#: Route of each engine's ``log_evidence``, in order of preference for selection.
+ROUTES = (("mcmc", "ti"), ("lsq", "laplace"), ("ukf", "ukf_innovations"))
+
+
+def _say(progress) -> Callable[[str], None]:
+    if callable(progress):
+        return progress
+    if progress:
+        return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
+    return lambda msg: None
+
+
+def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
+    """The engine whose evidence every model has (first of :data:`ROUTES`), and its route name."""
+    for eng, route in ROUTES:
+        have = {r["model"] for r in rows if r["engine"] == eng and _finite(r.get("log_evidence"))}
+        if have and all(m in have for m in models):
+            return eng, route
+    return None, None
+
+
+def _finite(v) -> bool:
+    return v is not None and math.isfinite(float(v))
+
+
+def crosscheck(ukf_idata, mcmc_idata) -> dict[str, dict[str, float]]:
+    """UKF estimates against the MCMC posterior of the same model, per parameter [SI].
+
+    ``z`` = (mean_ukf − mean_mcmc)/√(sd_ukf² + sd_mcmc²) and ``sd_ratio`` =
+    sd_ukf/sd_mcmc (|z| ≤ 3: agreement; sd_ratio ≪ 1: an overconfident filter).
+    """
+    u, m = results.summary_of(ukf_idata), results.summary_of(mcmc_idata)
+    out = {}
+    for name, mean_m in m.params.items():
+        if name not in u.params:
+            continue
+        sd_u, sd_m = float(u.params_sd[name]), float(m.params_sd[name])
+        scale = math.hypot(sd_u, sd_m)
+        out[name] = {"ukf": float(u.params[name]), "ukf_sd": sd_u, "mcmc": float(mean_m), "mcmc_sd": sd_m,
+                     "z": (float(u.params[name]) - float(mean_m)) / scale if scale > 0 else math.nan,
+                     "sd_ratio": sd_u / sd_m if sd_m > 0 else math.nan}
+    return out
+
+
+def compare(
+    record: xr.Dataset,
+    models: Sequence[str],
+    *,
+    engines: Sequence[str] = ("lsq", "mcmc", "ukf"),
+    validate: xr.Dataset | None = None,
+    seed: int = 0,
+    progress=True,
+    out_dir: str | Path | None = None,
+    estimators: dict | None = None,
+) -> dict:
+    """Fit every model with every engine and compare.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+        The record (package schema; masked samples are left out everywhere).
+    models : sequence of str
+        Model names, e.g. ``["dahl", "lugre+force_offset"]``.
+    engines : sequence of str
+        ``lsq``, ``mcmc``, ``ukf``.
+    validate : xarray.Dataset, optional
+        Another record of the same kind (thesis method 2).
+    seed : int
+    progress : bool or callable
+    out_dir : path, optional
+        Write each fit as ``MODEL__ENGINE.nc`` and the table as ``compare.csv``.
+    estimators : dict, optional
+        Engine name → configured estimator (e.g. ``{"ukf": UKF(n_lhs=4)}``)
+        overriding the defaults of :func:`bayes_mr.identify.engine`.
+
+    Returns
+    -------
+    dict
+        ``rows`` (one per model × engine: the ``fit`` keys, ``error`` if it
+        failed, ``validation`` with ``validate``), ``selected``,
+        ``bayes_factors`` (model → ln Z(selected) − ln Z(model)),
+        ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
+        ``idata`` (not JSON: (model, engine) → InferenceData).
+    """
+    say = _say(progress)
+    models = [get_model(m).name for m in models]
+    if not models:
+        raise ValueError("give at least one model to compare")
+    engines = list(dict.fromkeys(engines))
+    for e in engines:
+        engine(e)  # validates the name
+    estimators = dict(estimators or {})
+    rows: list[dict] = []
+    fits: dict[tuple[str, str], object] = {}
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    for m in models:
+        for e in engines:
+            t0 = _time.perf_counter()
+            say(f"{m} × {e} …")
+            est = estimators.get(e) or engine(e)
+            try:
+                idata = Identify(m, est).fit(record, seed=seed, progress=bool(progress))
+            except (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+                rows.append({"model": m, "engine": e, "error": f"{type(exc).__name__}: {exc}",
+                             "wall_s": _time.perf_counter() - t0})
+                say(f"{m} × {e}: failed ({exc})")
+                continue
+            fits[(m, e)] = idata
+            row = results.summary_of(idata).to_dict()
+            if validate is not None:
+                try:
+                    v = validate_fit(idata, validate)
+                    row["validation"] = {k: v[k] for k in ("mse", "force_errors", "force_nrmse", "masked")}
+                except ValueError as exc:
+                    row["validation"] = {"error": str(exc)}
+            rows.append(row)
+            if out_dir is not None:
+                results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")
+            say(f"{m} × {e}: ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s")
+
+    eng, route = selection_route(rows, models)
+    selected, factors = None, {}
+    if eng is not None:
+        ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == eng}
+        selected = max(ln_z, key=ln_z.get)
+        factors = {m: ln_z[selected] - z for m, z in ln_z.items()}
+    cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
+             for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
+    out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
+           "evidence_engine": eng, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
+           "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0}
+    if out_dir is not None:
+        table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
+    out["idata"] = fits
+    return out
+
+
+def table(out: dict) -> pd.DataFrame:
+    """One line per row of a comparison: model, engine, ln Z, ln BF, MSE, force NRMSE, E_t, wall time."""
+    lines = []
+    for r in out["rows"]:
+        fe = r.get("force_errors") or {}
+        line = {"model": r["model"], "engine": r["engine"], "ln Z": r.get("log_evidence"),
+                "ln BF vs selected": out["bayes_factors"].get(r["model"]) if r["engine"] == out["evidence_engine"]
+                else None,
+                "MSE": r.get("mse"), "force NRMSE": r.get("force_nrmse"), "E_t": fe.get("E_t"),
+                "wall [s]": r.get("wall_s"), "error": r.get("error", "")}
+        v = r.get("validation")
+        if v is not None:
+            line["MSE (validation)"] = v.get("mse")
+            line["force NRMSE (validation)"] = v.get("force_nrmse")
+        lines.append(line)
+    return pd.DataFrame(lines)
