@@ -15,7 +15,7 @@ def run_study(name, tmp_path, *extra):
 
 
 def test_studies_are_listed():
-    assert {"table-3-2", "numerical-selection"} <= set(study_names())
+    assert {"table-3-2", "numerical-selection", "virtual-shake-table", "chapter5-real-record"} <= set(study_names())
 
 
 def test_table_3_2_quick(tmp_path):
@@ -29,6 +29,24 @@ def test_numerical_selection_quick(tmp_path):
     assert (out / "report.md").exists() and (out / "figures" / "loops_zoom.png").exists()
     assert summary["dahl_max_error"] < 0.05
     assert summary["dahl_trained_fraction"] >= 0.9
+
+
+def test_virtual_shake_table_quick(tmp_path):
+    """The shake-table study reports identified against measured damper force, from x and a only."""
+    out, summary = run_study("virtual-shake-table", tmp_path, "--quick")
+    assert (out / "report.md").exists() and (out / "shake_table.csv").exists()
+    ukf = next(r for r in summary["rows"] if r["engine"] == "ukf")
+    assert 0 < ukf["force NRMSE (A)"] < 1 and 0 < ukf["force NRMSE (B)"] < 1
+    assert (out / "shake_table.csv").read_text().startswith("model,engine")
+
+
+@pytest.mark.slow
+def test_chapter5_real_record_full(tmp_path):
+    """Chapter 5's procedure on the measured damper: every form, validated on the part never fitted."""
+    _, summary = run_study("chapter5-real-record", tmp_path)
+    assert summary["selected"] is not None
+    assert summary["spencer_1997"]["part_b"]["force_nrmse"] < 1
+    assert all("validation" in r for r in summary["rows"] if "error" not in r)
 
 
 @pytest.mark.slow

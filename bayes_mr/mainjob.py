@@ -1,0 +1,534 @@
+"""The main job (``bayes-mr run``, ``make run``): the measured MR damper through the whole procedure.
+
+On the packaged NEES record (a device test: imposed piston displacement,
+command voltage, measured force):
+
+1. **Prepare.** Quality control (nothing is masked on this record, and the
+   report says so), trimming to the excited part, decimation to
+   :attr:`Budget.fs` with an anti-alias filter, and a split into part A
+   (training, the first :attr:`Budget.train_fraction`) and part B (never seen
+   by any fit).
+2. **Compare.** Every form with least squares (Laplace evidence), the emcee
+   posterior (TI evidence) where the budget allows and the thesis's UKF
+   (LHS × τ priors); selection by evidence, MSE and force NRMSE beside it;
+   thesis method 1 (scores on A) and method 2 (predicting B).
+3. **A paper's table.** Spencer et al. (1997)'s published parameters (from a
+   secondary source, converted to SI; :mod:`bayes_mr.models.forms`) predict B
+   next to the identified models; the identified Spencer parameters stand
+   next to the published ones.
+4. **Diagnose** the selected model on A (effects named, model extended, gain
+   on B).
+5. **Virtual shake table.** The thesis's frame built around the measured
+   damper by inverse dynamics (:mod:`bayes_mr.data.virtual_table`); the UKF
+   identifies the best of the thesis's four forms (by the same evidence) from
+   displacement and acceleration only, and the damper force it implies is
+   compared with the measured force.
+
+Everything is written to ``out_dir``: ``report.md`` with figures, tables as
+CSV, every fit as netCDF, ``summary.json``; and the README's run section
+(numbers computed in this run).
+"""
+
+from __future__ import annotations
+
+import sys
+import time as _time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from . import plots, results
+from .compare import compare, table
+from .data import load_packaged, trim_excited
+from .data.derive import decimate_record
+from .data.virtual_table import THESIS_FRAME, virtual_shake_table
+from .identify import UKF, Emcee, Identify, LeastSquares, predict
+from .inference.mcmc import MCMCSettings
+from .inference.ukf import TAUS
+from .models import FORMS, get_model
+from .report import fmt, markdown_table
+from .scores import score
+
+#: Where the published Spencer (1997) parameters come from (issue #6; a secondary source).
+SPENCER_SOURCE = ("Spencer, Dyke, Sain & Carlson (1997), J. Eng. Mech. 123(3), prototype damper, "
+                  "as quoted in a secondary source (not checked against the paper); converted to SI")
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How much of the record and of each estimator the job uses.
+
+    Attributes
+    ----------
+    fs : float
+        Target sampling rate after decimation [Hz] (an integer factor of the record's).
+    duration_s : float or None
+        Length of the trimmed record used [s] (None: all of it).
+    train_fraction : float
+        Share of the record in part A (training); the rest is part B.
+    forms : tuple of str
+        Models compared.
+    mcmc_max_params : int
+        Forms with more free parameters get no emcee posterior in this budget
+        (the report says which).
+    mcmc : MCMCSettings
+        Settings of each posterior (a run that hits ``max_steps`` is flagged
+        not converged, not hidden).
+    evidence : str
+        ``"ti"`` or ``"laplace"`` for the MCMC rows.
+    ukf_lhs : int
+        Latin-hypercube priors per index of dispersion.
+    ukf_taus : tuple of float
+        Indices of dispersion (thesis: ten).
+    diagnose_s : float or None
+        Run the diagnosis of the selected model on the first this-many
+        seconds of part A (None: all of A; 0: no diagnosis). Each effect is a
+        refit of the model, so for a stiff 14-parameter model (Spencer) the
+        window sets the cost.
+    """
+
+    fs: float
+    duration_s: float | None
+    train_fraction: float = 0.6
+    forms: tuple[str, ...] = tuple(FORMS)
+    mcmc_max_params: int = 6
+    mcmc: MCMCSettings = field(default_factory=lambda: MCMCSettings(max_steps=3000, check_every=250))
+    evidence: str = "ti"
+    ukf_lhs: int = 3
+    ukf_taus: tuple[float, ...] = TAUS
+    diagnose_s: float | None = 6.0
+
+
+#: ``make run``: the whole trimmed record at ~250 Hz (the force's content lies below ~50 Hz; the
+#: simulator sub-steps the stiff hysteresis). Within ~15 minutes on 2 cores: an emcee posterior of at
+#: most 1000 steps for the forms of ≤ 4 parameters (dahl: ~1.5–3 minutes on part A, measured; LuGre
+#: and Bouc–Wen cost as much again each, normalized Bouc–Wen ~5× and Spencer ~80× per simulation),
+#: selection by the Laplace evidence every form has; a thermodynamic-integration ladder per form
+#: (several minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
+FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=4,
+              mcmc=MCMCSettings(max_steps=1000, check_every=250), evidence="laplace", ukf_lhs=2)
+#: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains).
+QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
+               mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
+               evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1), diagnose_s=0.0)
+
+
+def _say(progress):
+    if callable(progress):
+        return progress
+    if progress:
+        t0 = _time.perf_counter()
+        return lambda msg: print(f"[{_time.perf_counter() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+    return lambda msg: None
+
+
+def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Dataset, xr.Dataset, xr.Dataset, dict]:
+    """Quality-controlled, trimmed, decimated record and its parts A and B.
+
+    Returns
+    -------
+    whole, part_a, part_b : xarray.Dataset
+    info : dict
+        What was done: masked samples, trim window, decimation factor, sizes.
+    """
+    rec = load_packaged() if record is None else record
+    trimmed, trim = trim_excited(rec)
+    factor = max(1, int(round(float(trimmed.attrs["fs"]) / budget.fs)))
+    rec = decimate_record(trimmed, factor) if factor > 1 else trimmed
+    if budget.duration_s is not None:
+        rec = rec.isel(time=slice(0, int(budget.duration_s * float(rec.attrs["fs"]))))
+    n = rec.sizes["time"]
+    cut = int(budget.train_fraction * n)
+    part_a = rec.isel(time=slice(0, cut))
+    part_b = rec.isel(time=slice(cut, None))
+    # every simulation starts from rest at the first sample: B's clock restarts too
+    part_b = part_b.assign_coords(time=part_b["time"].values - float(part_b["time"].values[0]))
+    part_a.attrs = {**rec.attrs, "source": f"{rec.attrs.get('source', 'record')} part A"}
+    part_b.attrs = {**rec.attrs, "source": f"{rec.attrs.get('source', 'record')} part B"}
+    info = {
+        "source": str(rec.attrs.get("source", "")),
+        "masked": int((~rec["valid"].values.astype(bool)).sum()),
+        "trim": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in trim.items()},
+        "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n),
+        "duration_s": float(n / rec.attrs["fs"]),
+        "part_a_s": float(cut / rec.attrs["fs"]), "part_b_s": float((n - cut) / rec.attrs["fs"]),
+    }
+    return rec, part_a, part_b, info
+
+
+def _engines_for(form: str, budget: Budget, kind: str) -> list[str]:
+    n_free = len(get_model(form).free_names(kind))
+    engines = ["lsq"]
+    if n_free <= budget.mcmc_max_params:
+        engines.append("mcmc")
+    engines.append("ukf")
+    return engines
+
+
+def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
+    """Every form × engine on A, validated on B (one :func:`bayes_mr.compare.compare` per form)."""
+    kind = part_a.attrs["kind"]
+    estimators = {"lsq": LeastSquares(),
+                  "mcmc": Emcee(settings=replace(budget.mcmc, seed=seed, progress=False), evidence=budget.evidence),
+                  "ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)}
+    rows, fits, skipped = [], {}, {}
+    for form in budget.forms:
+        engines = _engines_for(form, budget, kind)
+        if "mcmc" not in engines:
+            skipped[form] = (f"{len(get_model(form).free_names(kind))} free parameters > "
+                             f"{budget.mcmc_max_params}: no emcee posterior in this budget")
+        out = compare(part_a, [form], engines=engines, validate=part_b, seed=seed, progress=say,
+                      estimators=estimators)
+        rows += out["rows"]
+        fits.update(out["idata"])
+        for (m, e), idata in out["idata"].items():
+            results.save(idata, out_dir / "fits" / f"{m.replace('+', '_')}__{e}.nc")
+    # selection across forms: one evidence route for all (the one every form has)
+    from .compare import selection_route
+
+    eng, route = selection_route(rows, list(budget.forms))
+    ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == eng and "error" not in r}
+    selected = max(ln_z, key=ln_z.get) if ln_z else None
+    factors = {m: ln_z[selected] - z for m, z in ln_z.items()} if selected else {}
+    return {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
+            "evidence_engine": eng, "mcmc_skipped": skipped, "idata": fits}
+
+
+#: The forms the thesis identified on its shake table (Spencer's model is a device model with 14 parameters).
+THESIS_FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
+
+
+def _best_thesis_form(comp: dict) -> str | None:
+    """The thesis form with the highest evidence on the selection route (for the virtual shake table)."""
+    ln_z = {r["model"]: float(r["log_evidence"]) for r in comp["rows"]
+            if r["engine"] == comp["evidence_engine"] and "error" not in r and r["model"] in THESIS_FORMS}
+    return max(ln_z, key=ln_z.get) if ln_z else None
+
+
+def _best_by_validation(rows: list[dict]) -> dict | None:
+    ok = [r for r in rows if r.get("validation", {}).get("force_nrmse") is not None]
+    return min(ok, key=lambda r: r["validation"]["force_nrmse"]) if ok else None
+
+
+def published_spencer(part_a, part_b, rows: list[dict]) -> dict:
+    """The published Spencer (1997) parameters on A and B, next to the identified ones."""
+    model = get_model("spencer")
+    kind = part_b.attrs["kind"]
+    names = model.param_names(kind)
+    published = dict(zip(names, model.theta(kind, {})))
+    out = {"source": SPENCER_SOURCE, "params": published}
+    for label, rec in (("part_a", part_a), ("part_b", part_b)):
+        try:
+            pred = predict(model, rec, published)
+            s = score(rec, pred)
+            out[label] = {"force_nrmse": s["force_nrmse"], "mse": s["mse"], "force_errors": s["force_errors"]}
+        except ValueError as exc:
+            out[label] = {"error": str(exc)}
+    ident = next((r for r in rows if r["model"] == "spencer" and r["engine"] == "lsq" and "error" not in r), None)
+    if ident is not None:
+        out["identified"] = {"engine": "lsq", "params": ident["params"], "params_sd": ident["params_sd"]}
+    return out
+
+
+def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
+    """The thesis's UKF on a virtual shake table built from the measured damper (A to train, B to check)."""
+    vst_a = virtual_shake_table(part_a)
+    vst_b = virtual_shake_table(part_b)
+    out = {"frame": dict(THESIS_FRAME), "model": model}
+    for label, est in (("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)), ("lsq", LeastSquares())):
+        say(f"virtual shake table: {model} × {label} (displacement and acceleration only)")
+        try:
+            idata = Identify(model, est).fit(vst_a, seed=seed, progress=False)
+        except (RuntimeError, ValueError) as exc:
+            out[label] = {"error": str(exc)}
+            continue
+        results.save(idata, out_dir / "fits" / f"shake_table__{model.replace('+', '_')}__{label}.nc")
+        summ = results.summary_of(idata)
+        theta = results.point_of(idata)
+        entry = {"params": summ.params, "mse": summ.mse, "force_nrmse_a": summ.force_nrmse,
+                 "force_errors_a": summ.force_errors, "trained": summ.trained, "diverged": summ.diverged,
+                 "wall_s": summ.wall_s}
+        try:
+            pred_b = predict(model, vst_b, theta)
+            s = score(vst_b, pred_b)
+            entry.update(force_nrmse_b=s["force_nrmse"], mse_b=s["mse"])
+            entry["_pred_b"] = pred_b
+        except ValueError as exc:
+            entry["error_b"] = str(exc)
+        out[label] = entry
+    out["_vst_b"] = vst_b
+    return out
+
+
+def _figures(out_dir: Path, part_b, rows, fits, selected, spencer, vst) -> dict[str, str]:
+    """Force on B (measured, selected identified, published Spencer), loops, and the shake-table force."""
+    figs = {}
+    t = part_b["time"].values
+    x = part_b["displacement"].values
+    curves = {"measured": part_b["force"].values}
+    sel = next((r for r in rows if r["model"] == selected and r["engine"] == "lsq" and "error" not in r), None)
+    best = _best_by_validation(rows)
+    for label, r in ((f"{selected} (lsq, selected by evidence)", sel),
+                     (f"{best['model']} ({best['engine']}, best on B)" if best else "", best)):
+        if r is not None and label not in curves:
+            try:
+                curves[label] = predict(r["model"], part_b, r["params"])["force"]
+            except ValueError:
+                pass
+    try:
+        curves["Spencer 1997 published"] = predict("spencer", part_b, spencer["params"])["force"]
+    except ValueError:
+        pass
+    window = (0.0, min(4.0, float(t[-1])))
+    figs["force_b"] = str(plots.save(plots.time_series(t, {"force [N]": curves}, window=window,
+                                                       title="part B (never fitted): damper force"),
+                                     out_dir / "force_part_b.png"))
+    sl = slice(0, int(window[1] * float(part_b.attrs["fs"])))
+    figs["hysteresis_b"] = str(plots.save(plots.hysteresis(x, curves, window=sl, title="part B: force–displacement"),
+                                          out_dir / "hysteresis_part_b.png"))
+    if vst is not None and "_vst_b" in vst:
+        v = vst["_vst_b"]
+        panel = {"measured damper force": v["force"].values}
+        for label in ("ukf", "lsq"):
+            pred = vst.get(label, {}).get("_pred_b")
+            if pred is not None:
+                panel[f"identified ({label}, from x and a only)"] = pred["force"]
+        figs["shake_table"] = str(plots.save(plots.time_series(v["time"].values, {"force [N]": panel}, window=window,
+                                                               title="virtual shake table, part B"),
+                                             out_dir / "shake_table_force.png"))
+    return figs
+
+
+def _strip(d):
+    """Drop private (``_``-prefixed) entries: arrays kept for the figures."""
+    if isinstance(d, dict):
+        return {k: _strip(v) for k, v in d.items() if not str(k).startswith("_")}
+    if isinstance(d, list):
+        return [_strip(v) for v in d]
+    return d
+
+
+def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, progress=True,
+        budget: Budget | None = None, record: xr.Dataset | None = None, readme: bool = True,
+        stages: tuple[str, ...] = ("compare", "spencer", "diagnose", "shake_table")) -> dict:
+    """The main job. Returns the summary written to ``out_dir/summary.json``.
+
+    Parameters
+    ----------
+    out_dir : path
+    quick : bool
+        :data:`QUICK` instead of :data:`FULL`.
+    seed : int
+    progress : bool or callable
+    budget : Budget, optional
+        Overrides ``quick``.
+    record : xarray.Dataset, optional
+        A device test to use instead of the packaged NEES record.
+    readme : bool
+        Write the README's run section (only for the full job on the packaged record).
+    stages : tuple of str
+        Stages after the comparison (which always runs): ``spencer``,
+        ``diagnose``, ``shake_table``.
+    """
+    t0 = _time.perf_counter()
+    say = _say(progress)
+    budget = budget or (QUICK if quick else FULL)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    timing: dict[str, float] = {}
+
+    say("preparing the record (quality, trim, decimate, split)")
+    whole, part_a, part_b, info = prepare(budget, record)
+    say(f"{info['samples']} samples at {info['fs']:.1f} Hz; A {info['part_a_s']:.1f} s, B {info['part_b_s']:.1f} s")
+    timing["prepare"] = _time.perf_counter() - t0
+
+    t = _time.perf_counter()
+    comp = compare_forms(part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
+    timing["compare"] = _time.perf_counter() - t
+    selected = comp["selected"]
+    say(f"selected by {comp['evidence_route']} evidence: {selected}")
+    tab = table(comp)
+    tab.to_csv(out_dir / "compare.csv", index=False)
+
+    spencer = published_spencer(part_a, part_b, comp["rows"])
+    params = pd.DataFrame({"parameter": list(spencer["params"]),
+                           "published (SI)": list(spencer["params"].values())})
+    if "identified" in spencer:
+        params["identified (lsq, part A)"] = [spencer["identified"]["params"].get(k) for k in spencer["params"]]
+        params["sd"] = [spencer["identified"]["params_sd"].get(k) for k in spencer["params"]]
+    params.to_csv(out_dir / "spencer_parameters.csv", index=False)
+
+    diag = None
+    if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
+        t = _time.perf_counter()
+        window = part_a if budget.diagnose_s is None else part_a.isel(
+            time=slice(0, int(budget.diagnose_s * float(part_a.attrs["fs"]))))
+        say(f"diagnosing {selected} on {window.sizes['time'] / float(part_a.attrs['fs']):.1f} s of part A")
+        from .diagnose import diagnose
+
+        try:
+            diag = diagnose(window, selected, validate=part_b, out_dir=out_dir / "diagnose", seed=seed,
+                            progress=say)
+        except (RuntimeError, ValueError) as exc:
+            diag = {"error": str(exc)}
+        timing["diagnose"] = _time.perf_counter() - t
+
+    vst = None
+    thesis_form = _best_thesis_form(comp) if "shake_table" in stages else None
+    if thesis_form is not None:
+        t = _time.perf_counter()
+        vst = shake_table(part_a, part_b, thesis_form, budget, seed=seed, out_dir=out_dir, say=say)
+        timing["shake_table"] = _time.perf_counter() - t
+
+    figs = _figures(out_dir, part_b, comp["rows"], comp["idata"], selected, spencer, vst)
+    best = _best_by_validation(comp["rows"])
+    summary = {
+        "budget": {k: (v if not isinstance(v, MCMCSettings) else asdict(v)) for k, v in asdict(budget).items()},
+        "record": info,
+        "rows": comp["rows"], "selected": selected, "bayes_factors": comp["bayes_factors"],
+        "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
+        "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
+                                                     "force_nrmse": best["validation"]["force_nrmse"]},
+        "spencer_1997": spencer, "diagnose": diag, "shake_table": vst, "figures": figs,
+        "stages_s": timing, "seed": seed,
+    }
+    summary["wall_s"] = _time.perf_counter() - t0
+    summary = _strip(summary)
+    results.write_json(summary, out_dir / "summary.json")
+    text = report_markdown(summary, tab, params)
+    (out_dir / "report.md").write_text(text)
+    say(f"wrote {out_dir / 'report.md'} in {summary['wall_s']:.0f} s")
+    from .readme import project_readme, update_section
+
+    readme_path = project_readme()
+    if readme and record is None and budget == FULL and readme_path.is_file():
+        update_section(readme_path, "run", readme_markdown(summary, out_dir, readme_path.parent / "figures"))
+    return summary
+
+
+# --- the report ------------------------------------------------------------------------------
+
+def _row(rows, model, engine):
+    return next((r for r in rows if r["model"] == model and r["engine"] == engine and "error" not in r), None)
+
+
+def headline(summary: dict) -> list[str]:
+    """The sentences a structural engineer reads first (every number from this run)."""
+    rows, sel = summary["rows"], summary["selected"]
+    lines = []
+    rec = summary["record"]
+    lines.append(f"Record: {rec['source']} — {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz after trimming and "
+                 f"decimation by {rec['decimation']}; {rec['masked']} samples masked by quality control. "
+                 f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s.")
+    if sel:
+        bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
+        runner = min(bf, key=bf.get) if bf else None
+        lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
+                     + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
+    best = summary["best_on_part_b"]
+    sp = summary["spencer_1997"].get("part_b", {})
+    if best:
+        lines.append(f"On part B the best prediction is {best['model']} ({best['engine']}), force NRMSE "
+                     f"{fmt(best['force_nrmse'], 3)}; Spencer et al. (1997)'s published parameters give "
+                     f"{fmt(sp.get('force_nrmse'), 3)} on the same part.")
+    sel_lsq = _row(rows, sel, "lsq") if sel else None
+    if sel_lsq and sel_lsq.get("validation"):
+        lines.append(f"The selected model ({sel}, least squares) predicts part B with force NRMSE "
+                     f"{fmt(sel_lsq['validation']['force_nrmse'], 3)} (on its training part A: "
+                     f"{fmt(sel_lsq['force_nrmse'], 3)}).")
+    d = summary.get("diagnose")
+    if d and "error" not in d:
+        g = d["gain"]
+        lines.append(f"Diagnosis of {d['baseline']['model']}: cause **{d['cause']}**"
+                     + (f" (effects {', '.join(d['effects'])}); extended model {d['extended']['model']}: MSE ratio "
+                        f"{fmt(g['mse_ratio'], 3)}, Δ ln Z {fmt(g['delta_log_evidence'], 4)}, error ratio on part B "
+                        f"{fmt(g['validation_mse_ratio'], 3)}." if d["effects"] else
+                        " — no effect passes the calibrated threshold."))
+    v = summary.get("shake_table")
+    if v and "ukf" in v and "error" not in v["ukf"]:
+        u = v["ukf"]
+        lines.append(f"Virtual shake table ({v['model']}, thesis frame m = {v['frame']['mass']:g} kg): the UKF, "
+                     f"from displacement and acceleration only, implies a damper force with NRMSE "
+                     f"{fmt(u.get('force_nrmse_a'), 3)} on A and {fmt(u.get('force_nrmse_b'), 3)} on B against the "
+                     f"measured force ({u.get('trained')} runs trained, {u.get('diverged')} diverged).")
+    return lines
+
+
+def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> str:
+    """``report.md`` of the main job."""
+    out = ["# bayes_mr main job: the measured MR damper", ""]
+    out += [f"- {s}" for s in headline(summary)]
+    out += ["", "## Models × estimators (trained on part A; validation = part B)", "",
+            markdown_table(tab.drop(columns=[c for c in ("error",) if not tab[c].astype(bool).any()])), "",
+            f"ln Z route for selection: {summary['evidence_route']}. ln BF = ln Z(selected) − ln Z(model). "
+            "MSE: thesis eq. 3-44 on the force channel (≈ 100 when the model is right to the noise).", ""]
+    for form, why in summary["mcmc_skipped"].items():
+        out.append(f"- {form}: {why}.")
+    conv = [r for r in summary["rows"] if r["engine"] == "mcmc" and "error" not in r]
+    if conv:
+        out += ["", "MCMC diagnostics: " + "; ".join(
+            f"{r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
+            f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (budget)'}"
+            for r in conv) + "."]
+    out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
+            "## Spencer et al. (1997): published against identified", "",
+            f"Source: {summary['spencer_1997']['source']}.", "", markdown_table(params), ""]
+    d = summary.get("diagnose")
+    if d:
+        out += ["## Diagnosis", ""]
+        if "error" in d:
+            out.append(f"Diagnosis failed: {d['error']}")
+        else:
+            out.append(f"Full report: [diagnose/diagnose.md](diagnose/diagnose.md). Cause: **{d['cause']}**.")
+            out += ["", "![residuals](diagnose/residuals_time.png)"]
+        out.append("")
+    v = summary.get("shake_table")
+    if v:
+        out += ["## Virtual shake table", "",
+                f"Frame m = {v['frame']['mass']:g} kg, k = {v['frame']['k']:g} N/m, c = {v['frame']['c']:g} N·s/m "
+                "around the measured damper (inverse dynamics); identification from displacement and absolute "
+                "acceleration only; the damper force is then compared with the measured one.", ""]
+        for label in ("ukf", "lsq"):
+            e = v.get(label, {})
+            if "error" in e:
+                out.append(f"- {label}: failed ({e['error']})")
+            elif e:
+                out.append(f"- {label}: force NRMSE {fmt(e.get('force_nrmse_a'), 3)} (A), "
+                           f"{fmt(e.get('force_nrmse_b'), 3)} (B); MSE {fmt(e.get('mse'), 4)}")
+        out += ["", "![shake table](shake_table_force.png)", ""]
+    out += ["## Time", "", ", ".join(f"{k} {v:.0f} s" for k, v in summary["stages_s"].items())
+            + f"; total {summary['wall_s']:.0f} s.", ""]
+    return "\n".join(out)
+
+
+#: Figures of the main job copied next to the README (``results/`` is not under version control).
+README_FIGURES = {"force_b": "force_part_b.png", "shake_table": "shake_table_force.png"}
+
+
+def readme_markdown(summary: dict, out_dir: Path, figure_dir: Path | None = None) -> str:
+    """The README's run section: the headline and figures of this run.
+
+    With ``figure_dir`` (a folder beside the README) the figures are copied
+    there and linked relative to the README.
+    """
+    import shutil
+
+    lines = [f"- {s}" for s in headline(summary)]
+    figs = dict(summary.get("figures", {}))
+    d = summary.get("diagnose") or {}
+    if d.get("figures", {}).get("residuals_time"):
+        figs["diagnose_residuals"] = d["figures"]["residuals_time"]
+    if figure_dir is not None:
+        figure_dir.mkdir(parents=True, exist_ok=True)
+        lines.append("")
+        for key in ("force_b", "diagnose_residuals", "shake_table"):
+            if key in figs and Path(figs[key]).exists():
+                target = figure_dir / f"run_{Path(figs[key]).name}"
+                shutil.copyfile(figs[key], target)
+                lines.append(f"![{key}]({figure_dir.name}/{target.name})")
+    lines += ["", f"Written by `make run` in {summary['wall_s'] / 60:.1f} min on this project's 2-core machine; "
+              f"full report: `{out_dir}/report.md`."]
+    return "\n".join(lines)
