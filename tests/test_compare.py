@@ -45,7 +45,7 @@ def test_selection_route_needs_every_model():
 
 def test_compare_selects_the_true_model_by_ti_with_mcmc_and_lsq():
     """Two models × lsq, mcmc: TI selects the model with the hidden offset; every row has the fit keys."""
-    rec = device_record(1.5)
+    rec = device_record(1.6, fs=250.0)
     out = compare(rec, ["dahl", "dahl+force_offset"], engines=("lsq", "mcmc"), progress=False,
                   estimators={"mcmc": Emcee(settings=SHORT)})
     assert len(out["rows"]) == 4 and all(FIT_KEYS <= set(r) for r in out["rows"])
