@@ -16,7 +16,7 @@ from bayes_mr import results
 from bayes_mr.data.schema import make_record
 from bayes_mr.inference import ukf
 from bayes_mr.inference import ukf_kernel as K
-from bayes_mr.selection import scores as scores_mod
+from bayes_mr import scores as scores_mod
 from bayes_mr.selection import training as training_mod
 from bayes_mr.selection import (
     Trial, concat_records, method1, method2, method3, score, select, train, validate_runs,
