@@ -135,6 +135,26 @@ def test_lag_of_finds_a_fractional_delay():
     assert lag_of(shifted, y) == pytest.approx(3.4, abs=0.1)
 
 
+def test_residual_figures_of_a_clean_record_show_the_baseline():
+    """With no cause the extended model *is* the baseline: its curves are drawn once, not dropped."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from bayes_mr.diagnose.report import crosscorr_figure, residual_binned_figure, whiteness_figure
+    from bayes_mr.diagnose.residuals import residual_views
+    from bayes_mr.simulate import Inputs, simulate
+
+    rec = simulated_record("structure", "dahl", duration=2.0)
+    m = get_model("dahl")
+    sim = simulate(m, Inputs.from_record(rec), m.theta("structure", {}))
+    views = residual_views(rec, {k: np.asarray(v) for k, v in sim.outputs.items()})
+    for fig in (residual_binned_figure(views, views), whiteness_figure(views, views, rec.sizes["time"]),
+                crosscorr_figure(views, views)):
+        drawn = [ax for ax in fig.axes if ax.axison]
+        assert drawn and all(ax.lines for ax in drawn)
+        assert all(len(ax.get_legend_handles_labels()[1]) >= 1 for ax in drawn)
+
+
 @pytest.mark.parametrize("phi", [0.0, 0.5, 0.8])
 def test_design_effect_is_the_variance_inflation_of_a_smooth_regressor(phi):
     """κ → (1+φ)/(1−φ) for a slowly varying sensitivity against AR(1) residuals, → 1 for a white one."""

@@ -110,7 +110,7 @@ def residual_binned_figure(before: Views, after: Views):
         for j, v in enumerate(variables):
             ax = axes[i, j]
             for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
-                if views is after and after is before:
+                if label == "after" and after is before:
                     continue
                 b = views.channels[c].bins[v]
                 ax.plot(b.center, b.mean, "o-", ms=2, lw=0.9, color=color, label=f"{label} η²={b.eta2:.3f}")
@@ -133,7 +133,7 @@ def whiteness_figure(before: Views, after: Views, n: int):
     band = 1.96 / math.sqrt(n)
     for ax, c in zip(axes[0], chans):
         for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
-            if views is after and after is before:
+            if label == "after" and after is before:
                 continue
             cv = views.channels[c]
             ax.plot(np.arange(cv.acf.size), cv.acf, color=color, lw=0.9,
@@ -166,7 +166,7 @@ def crosscorr_figure(before: Views, after: Views):
         ax.legend(fontsize=7)
     for ax, c in zip(axes[1], chans):
         for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
-            if views is after and after is before:
+            if label == "after" and after is before:
                 continue
             lags, cc = views.input_cross[c]
             ax.plot(lags, cc, color=color, lw=0.9, label=f"{label} (lag {views.channels[c].lag_samples:+.2f})")
