@@ -49,9 +49,16 @@ def _say(progress) -> Callable[[str], None]:
 
 
 def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
-    """The engine whose evidence every model has (first of :data:`ROUTES`), and its route name."""
+    """The engine whose evidence every model has (first of :data:`ROUTES`), and its route name.
+
+    A row counts for its engine's route only if its ``log_evidence`` came by
+    that route: an ``mcmc`` row whose evidence is the Laplace approximation
+    (``Emcee(evidence="laplace")``) does not stand in for thermodynamic
+    integration.
+    """
     for eng, route in ROUTES:
-        have = {r["model"] for r in rows if r["engine"] == eng and _finite(r.get("log_evidence"))}
+        have = {r["model"] for r in rows if r["engine"] == eng and _finite(r.get("log_evidence"))
+                and r.get("evidence_route", route) == route}
         if have and all(m in have for m in models):
             return eng, route
     return None, None

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from bayes_mr.data import load_packaged
-from bayes_mr.data.virtual_table import virtual_shake_table
+from bayes_mr.data.virtual_table import implied_damper_force, virtual_shake_table
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import Inputs, simulate, synthesize
@@ -32,6 +32,11 @@ def test_frame_driven_by_the_virtual_table_follows_the_damper_motion():
     f = dev["force"].values
     f_err = np.sqrt(np.mean((damper_force[inner] - f[inner]) ** 2)) / f.std()
     assert f_err < 0.05
+    # what a user of an identified structure model has: its outputs and the known frame
+    implied = implied_damper_force(table, sim.outputs)
+    assert np.sqrt(np.mean((implied[inner] - f[inner]) ** 2)) / f.std() < 0.05
+    with pytest.raises(ValueError, match="not a virtual shake table"):
+        implied_damper_force(dev, sim.outputs)
 
 
 def test_table_from_the_measured_record_is_a_valid_structure_test():

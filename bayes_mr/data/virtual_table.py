@@ -18,10 +18,18 @@ displacement (the same one the package uses for velocity). The record keeps
 the measured damper force in ``force``, so identified and measured damper
 forces can be compared; an identification uses displacement and
 acceleration only, as the thesis did.
+
+An identified structure model lumps the frame's and the damper's linear
+terms in its ``c`` and ``k``, and its ``force`` output is only the
+hysteretic part of f_r (SPEC). The damper force it implies is what is left
+of the whole restoring force once the known frame is taken out,
+F̂ = f̂_r − c ẋ̂ − k x̂ with f̂_r = −m â (:func:`implied_damper_force`): that
+is the number to hold against the measured force.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import xarray as xr
 from scipy import signal
 
@@ -89,3 +97,30 @@ def virtual_shake_table(
     return make_record(device["time"].values, channels, kind="structure", mass=mass,
                        source=f"virtual shake table around {device.attrs.get('source', 'device test')}",
                        valid=valid, attrs=attrs)
+
+
+def implied_damper_force(table: xr.Dataset, predicted: dict[str, np.ndarray]) -> np.ndarray:
+    """The damper force a structure model identified on a virtual shake table implies [N].
+
+    Parameters
+    ----------
+    table : xarray.Dataset
+        A record made by :func:`virtual_shake_table` (frame attributes
+        ``frame_mass`` [kg], ``frame_k`` [N/m], ``frame_c`` [N·s/m]).
+    predicted : dict of str → ndarray, shape (n,)
+        Simulated ``displacement`` [m], ``velocity`` [m/s] and absolute
+        ``acceleration`` [m/s²] of the identified model on ``table``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        F̂ = −m â − c ẋ̂ − k x̂: the whole restoring force of the model less
+        the known frame's.
+    """
+    try:
+        m, k, c = (float(table.attrs[key]) for key in ("frame_mass", "frame_k", "frame_c"))
+    except KeyError as exc:
+        raise ValueError(f"{table.attrs.get('source', 'record')} is not a virtual shake table "
+                         f"(no {exc.args[0]} attribute): build it with virtual_shake_table") from None
+    return -m * np.asarray(predicted["acceleration"]) - c * np.asarray(predicted["velocity"]) \
+        - k * np.asarray(predicted["displacement"])
