@@ -448,6 +448,14 @@ def headline(summary: dict) -> list[str]:
         runner = min(bf, key=bf.get) if bf else None
         lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
                      + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
+    chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
+    if chains:
+        unconverged = [r["model"] for r in chains if not r.get("converged")]
+        lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
+                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
+                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
+                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
+                        if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
     best = summary["best_on_part_b"]
     sp = summary["spencer_1997"].get("part_b", {})
     if best:
@@ -475,9 +483,9 @@ def headline(summary: dict) -> list[str]:
         lines.append(f"Virtual shake table ({v['model']}, thesis frame m = {v['frame']['mass']:g} kg): the UKF, "
                      f"from displacement and acceleration only, implies a damper force (its restoring force less the "
                      f"known frame's) with NRMSE {fmt(u.get('force_nrmse_a'), 3)} on A and "
-                     f"{fmt(u.get('force_nrmse_b'), 3)} on B against the measured force; the hysteretic part alone, "
-                     f"all the thesis could look at, {fmt(u.get('hysteretic_nrmse_b'), 3)} on B "
-                     f"({u.get('trained')} UKF runs trained, {u.get('diverged')} diverged).")
+                     f"{fmt(u.get('force_nrmse_b'), 3)} on B against the measured force (its hysteretic part alone, the "
+                     f"structure model's force output: {fmt(u.get('hysteretic_nrmse_b'), 3)} on B; "
+                     f"{u.get('trained')} UKF runs trained, {u.get('diverged')} diverged).")
     return lines
 
 
