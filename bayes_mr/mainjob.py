@@ -244,8 +244,8 @@ def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, ou
     linear terms together, so the damper force it implies is its restoring
     force less the known frame's (:func:`~bayes_mr.data.virtual_table.implied_damper_force`);
     ``force_nrmse_a``/``_b`` score that against the measured force. The
-    hysteretic part alone (the structure model's ``force`` output, what the
-    thesis could look at) is scored beside it as ``hysteretic_nrmse_a``/``_b``.
+    hysteretic part alone (the structure model's ``force`` output) is scored
+    beside it as ``hysteretic_nrmse_a``/``_b``.
     """
     vst = {"a": virtual_shake_table(part_a), "b": virtual_shake_table(part_b)}
     out = {"frame": dict(THESIS_FRAME), "model": model}
