@@ -333,17 +333,23 @@ def test_implausible_magnitude_warns(tmp_path, column, scale, hint):
 
 def test_ground_acceleration_in_g_warns(tmp_path):
     ds = clean_record("sweep", "structure", seed=3, duration=1.0, fs=1024.0, amplitude=0.1)
-    cols = [ds["time"].values, ds["ground_acceleration"].values / 9.80665 / 5,
-            ds["displacement"].values, ds["acceleration"].values]
+    ag_in_g = ds["ground_acceleration"].values / 9.80665 / 5
+    cols = [ds["time"].values, ag_in_g, ds["displacement"].values, ds["acceleration"].values]
     p = write_csv(tmp_path / "g.csv", ["time", "ground_acceleration", "displacement", "acceleration"], cols)
-    with pytest.warns(UnitWarning, match="ground_acceleration=g"):
-        read_record(p, mass=50.0)
+    with pytest.warns(UnitWarning, match="ground_acceleration=g") as rec:
+        out = read_record(p, mass=50.0)
+    assert any("g.csv" in str(w.message) for w in rec if issubclass(w.category, UnitWarning))
+    # a warning, not a conversion: the data are read as written
+    np.testing.assert_allclose(out["ground_acceleration"].values, ag_in_g)
 
 
 def test_si_record_does_not_warn(tmp_path):
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", UnitWarning)
-        read_record(device_csv(tmp_path))
+    t, x, f = device_rows()
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        out = read_record(device_csv(tmp_path))
+    assert [str(w.message) for w in rec if issubclass(w.category, UnitWarning)] == []
+    np.testing.assert_allclose(out["force"].values, f)
 
 
 # ------------------------------------------------------------------ velocity, resampling, decimation
