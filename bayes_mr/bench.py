@@ -32,11 +32,16 @@ from .signals import thesis_signal
 from .simulate import synthesize
 
 
-def _signal_I_record(model: str, seed: int = 0, noise: float = 0.01):
-    sig = thesis_signal("I")
+def _frame_record(model: str, sig, *, values: dict | None = None, noise: float = 0.01, seed: int = 0,
+                  source: str):
+    """A structure test of the thesis's numerical frame (m = 50 kg) driven by ``sig``, 1 % noise."""
     m = get_model(model)
-    return synthesize(m, m.theta("structure", {}), sig.time, sig.as_input("structure"), mass=50.0,
-                      noise=noise, seed=seed, source="bench: thesis signal I")
+    return synthesize(m, m.theta("structure", values or {}), sig.time, sig.as_input("structure"), mass=50.0,
+                      noise=noise, seed=seed, source=source)
+
+
+def _signal_I_record(model: str, seed: int = 0, noise: float = 0.01):
+    return _frame_record(model, thesis_signal("I"), noise=noise, seed=seed, source="bench: thesis signal I")
 
 
 def _python_rhs(form: str, mass: float):
@@ -190,10 +195,8 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
     from .signals import make_signal
 
     sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=20.0, seed=seed)
-    m = get_model("dahl")
-    rec = synthesize(m, m.theta("structure", {}), sig.time, sig.as_input("structure"), mass=50.0,
-                     noise=0.01, seed=seed, source="bench: blwn 25 s")
-    lik = OutputError(m, rec)
+    rec = _frame_record("dahl", sig, seed=seed, source="bench: blwn 25 s")
+    lik = OutputError("dahl", rec)
     t0 = _time.perf_counter()
     res = fit_lsq(lik)
     lsq_s = _time.perf_counter() - t0
@@ -216,9 +219,8 @@ def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, o
     from .signals import make_signal
 
     sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=10.0, seed=seed)
-    m = get_model("dahl+force_offset")
-    rec = synthesize(m, m.theta("structure", {"f0": offset}), sig.time, sig.as_input("structure"), mass=50.0,
-                     noise=0.01, seed=seed + 77, source=f"bench: dahl+force_offset, blwn {duration:g} s")
+    rec = _frame_record("dahl+force_offset", sig, values={"f0": offset}, seed=seed + 77,
+                        source=f"bench: dahl+force_offset, blwn {duration:g} s")
     t0 = _time.perf_counter()
     out = diagnose(rec, "dahl", seed=seed, progress=False)
     return {"diagnose_s": _time.perf_counter() - t0, "diagnose_cause": out["cause"],
