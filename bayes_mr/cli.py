@@ -13,6 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .progress import on_terminal
+from .progress import say as progress_say
+
 
 class CLIError(Exception):
     """A user error the command reports in one line."""
@@ -49,13 +52,6 @@ def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
             raise CLIError(f"--prior {k}={v}: expected LO:HI in SI units") from None
         out[k] = (lo, hi)
     return out
-
-
-def _progress(enabled: bool):
-    """A one-line progress reporter on stderr (only on a terminal)."""
-    if not enabled or not sys.stderr.isatty():
-        return lambda msg: None
-    return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
 
 
 def _read(path: str, args, *, what: str = "record"):
@@ -162,7 +158,7 @@ def cmd_compare(args) -> int:
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else None
     out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
-                  progress=_progress(not args.quiet), out_dir=args.out, estimators=estimators)
+                  progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators)
     out.pop("idata")
     print(markdown_table(table(out)), file=sys.stderr)
     if out["selected"]:
@@ -177,7 +173,7 @@ def cmd_diagnose(args) -> int:
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None
     out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
-                   progress=_progress(not args.quiet))
+                   progress=progress_say(on_terminal(not args.quiet)))
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
           f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
           file=sys.stderr)
@@ -228,7 +224,7 @@ def cmd_bench(args) -> int:
     from .bench import bench_markdown, run_bench
     from .readme import project_readme, update_section
 
-    say = _progress(True)
+    say = progress_say(on_terminal(True))
     result = run_bench(seed=args.seed, progress=say)
     _write_json(result, args.json)
     if not args.no_readme and update_section(project_readme(), "bench", bench_markdown(result)):

@@ -23,9 +23,8 @@ the MCMC posterior (:mod:`bayes_mr.inference.crosscheck`).
 from __future__ import annotations
 
 import math
-import sys
 import time as _time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -33,19 +32,13 @@ import pandas as pd
 import xarray as xr
 
 from . import results
-from .identify import Identify, engine, validate as validate_fit
+from .identify import Identify, engine
+from .identify import validate as validate_fit
 from .models import get_model
+from .progress import say as progress_say
 
 #: Route of each engine's ``log_evidence``, in order of preference for selection.
 ROUTES = (("mcmc", "ti"), ("lsq", "laplace"), ("ukf", "ukf_innovations"))
-
-
-def _say(progress) -> Callable[[str], None]:
-    if callable(progress):
-        return progress
-    if progress:
-        return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
-    return lambda msg: None
 
 
 def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
@@ -127,7 +120,7 @@ def compare(
         ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
         ``idata`` (not JSON: (model, engine) → InferenceData).
     """
-    say = _say(progress)
+    say = progress_say(progress)
     models = [get_model(m).name for m in models]
     if not models:
         raise ValueError("give at least one model to compare")

@@ -31,7 +31,6 @@ CSV, every fit as netCDF, ``summary.json``; and the README's run section
 
 from __future__ import annotations
 
-import sys
 import time as _time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -51,6 +50,7 @@ from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
 from .metrics import force_nrmse
 from .models import FORMS, get_model
+from .progress import say as progress_say
 from .report import fmt, markdown_table
 from .scores import score
 
@@ -120,15 +120,6 @@ FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=5,
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
                mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
                evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1), diagnose_s=0.0)
-
-
-def _say(progress):
-    if callable(progress):
-        return progress
-    if progress:
-        t0 = _time.perf_counter()
-        return lambda msg: print(f"[{_time.perf_counter() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
-    return lambda msg: None
 
 
 def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Dataset, xr.Dataset, xr.Dataset, dict]:
@@ -353,7 +344,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         ``diagnose``, ``shake_table``.
     """
     t0 = _time.perf_counter()
-    say = _say(progress)
+    say = progress_say(progress, clock=True)
     budget = budget or (QUICK if quick else FULL)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

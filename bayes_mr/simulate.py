@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .models import Model, get_model
-from .models import kernel
+from .models import Model, get_model, kernel
 
 #: Output channels of a simulation, by kind of test.
 OUTPUT_NAMES = {

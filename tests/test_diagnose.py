@@ -17,7 +17,8 @@ import pytest
 
 from bayes_mr.diagnose import THRESHOLD, diagnose
 from bayes_mr.diagnose.inflation import design_effect_of
-from bayes_mr.diagnose.residuals import envelope, integrated_time, lag_of, ljung_box
+from bayes_mr.diagnose.residuals import envelope, lag_of, ljung_box
+from bayes_mr.stats import integrated_time
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import synthesize

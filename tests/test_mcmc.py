@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from bayes_mr.inference.crosscheck import ukf_vs_mcmc
+from bayes_mr.stats import integrated_times
 from bayes_mr.inference.mcmc import (
     MCMCSettings,
     fit_mcmc,
     initial_walkers,
-    integrated_times,
     sample,
     to_inference_data,
 )

@@ -20,9 +20,9 @@ import os
 import re
 import tempfile
 import warnings
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Iterable, Mapping
 
 import numpy as np
 import pandas as pd

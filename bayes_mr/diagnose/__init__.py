@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time as _time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import xarray as xr
 
 from ..inference.lsq import LSQSettings
 from ..models import NONE, Model, get_model
+from ..progress import say as progress_say
 from .fits import Fit, fit_model, predict, record_mse
 from .residuals import residual_views, varying_voltage
 from .screen import THRESHOLD, Candidate, forward_select
@@ -40,14 +40,6 @@ __all__ = ["FORMS", "THRESHOLD", "diagnose", "select_baseline"]
 
 #: Forms compared when no baseline is given (spencer only for device tests with a varying voltage).
 FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
-
-
-def _say(progress):
-    if callable(progress):
-        return progress
-    if progress:
-        return lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True)
-    return lambda msg: None
 
 
 def select_baseline(record: xr.Dataset, forms: tuple[str, ...] | None = None, *,
@@ -67,7 +59,7 @@ def select_baseline(record: xr.Dataset, forms: tuple[str, ...] | None = None, *,
         The selected fit and one row per form (``model``, ``log_evidence``,
         ``mse``, or ``error``).
     """
-    say = _say(progress)
+    say = progress_say(progress)
     if forms is None:
         forms = FORMS + (("spencer",) if record.attrs["kind"] == "device" and varying_voltage(record) else ())
     fits, rows = [], []
@@ -140,7 +132,7 @@ def diagnose(
         ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``.
     """
     t0 = _time.perf_counter()
-    say = _say(progress)
+    say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
     kind = record.attrs["kind"]
     if kind == "structure" and "mass" not in record.attrs:

@@ -29,27 +29,7 @@ import numpy as np
 
 from ..inference.lsq import _Residuals
 from ..likelihood import OutputError
-
-#: Correlation below which the residual autocorrelation counts as died out.
-RHO_SMALL = 0.05
-
-
-def bandwidth(r: np.ndarray) -> int:
-    """Bartlett bandwidth L [samples] for residuals r (n, c).
-
-    The lag where the pooled autocorrelation first falls below
-    :data:`RHO_SMALL`, but at least n/20 (the choice of
-    :mod:`bayes_mr.inference.lsq`: small long-lived correlations of a
-    structure's response to process noise matter), at most n/4 and 5000.
-    """
-    n = r.shape[0]
-    r = r - r.mean(axis=0)
-    f = np.fft.rfft(r, 2 * n, axis=0)
-    acf = np.fft.irfft(f * np.conj(f), axis=0)[: n // 4 + 1].sum(axis=1)
-    acf = acf / acf[0] if acf[0] > 0 else acf
-    below = np.flatnonzero(np.abs(acf) < RHO_SMALL)
-    cut = int(below[0]) if below.size else n // 4
-    return int(max(1, min(n // 4, 5000, max(cut, n // 20))))
+from ..stats import hac_bandwidth
 
 
 def _lagged(a: np.ndarray, b: np.ndarray, lag: int, m: int) -> np.ndarray:
@@ -111,7 +91,7 @@ def design_effect_of(R: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray]:
     lam : ndarray (d,)
     """
     n, n_c, d = G.shape
-    lag = bandwidth(R)
+    lag = hac_bandwidth(R, max_lag=min(R.shape[0] // 4, 5000))
     m = 2 * n
     w = 1.0 - np.abs(np.arange(-lag, lag + 1)) / (lag + 1)
     v_hac = np.zeros((d, d))

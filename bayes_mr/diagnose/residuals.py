@@ -27,6 +27,8 @@ import numpy as np
 import xarray as xr
 from scipy import stats
 
+from ..stats import autocorrelation, integrated_time
+
 #: Quantile bins of the binned views.
 N_BINS = 24
 #: Lags of the autocorrelation and cross-correlation views [samples].
@@ -97,16 +99,6 @@ def binned(x: np.ndarray, r: np.ndarray, nbins: int = N_BINS) -> Binned:
     return Binned(centers, mean, sd, float(between / var) if var > 0 else 0.0)
 
 
-def autocorrelation(r: np.ndarray, max_lag: int = MAX_LAG) -> np.ndarray:
-    """Sample autocorrelation ρ_0..ρ_max_lag of ``r`` (n,) (FFT, biased estimator)."""
-    r = np.asarray(r, float) - np.mean(r)
-    n = r.size
-    max_lag = min(max_lag, n - 1)
-    f = np.fft.rfft(r, 2 * n)
-    acov = np.fft.irfft(f * np.conj(f))[: max_lag + 1]
-    return acov / acov[0] if acov[0] > 0 else np.zeros(max_lag + 1)
-
-
 def ljung_box(r: np.ndarray, lags: int = LB_LAGS) -> tuple[float, float]:
     """Ljung–Box statistic Q = n(n+2) Σ_{k=1..h} ρ_k²/(n−k) and its χ²_h p-value.
 
@@ -119,22 +111,6 @@ def ljung_box(r: np.ndarray, lags: int = LB_LAGS) -> tuple[float, float]:
     k = np.arange(1, rho.size + 1)
     q = float(n * (n + 2) * np.sum(rho**2 / (n - k)))
     return q, float(stats.chi2.sf(q, rho.size))
-
-
-def integrated_time(r: np.ndarray, c: float = 5.0) -> float:
-    """Integrated autocorrelation time τ = 1 + 2 Σ_k ρ_k (Sokal's window, M ≥ c τ).
-
-    τ is the factor by which correlation inflates the variance of a residual
-    mean over an independent one: the number of samples that carry one
-    sample's worth of information. At least 1.
-    """
-    r = np.asarray(r, float)
-    rho = autocorrelation(r, max_lag=min(r.size // 4, 20000))
-    tau = 2.0 * np.cumsum(rho) - 1.0
-    m = np.arange(tau.size)
-    window = np.flatnonzero(m >= c * tau)
-    tau_hat = tau[window[0]] if window.size else tau[-1]
-    return float(max(tau_hat, 1.0))
 
 
 def crosscorrelation(a: np.ndarray, b: np.ndarray, max_lag: int = MAX_LAG) -> tuple[np.ndarray, np.ndarray]:
@@ -303,7 +279,7 @@ def residual_views(record: xr.Dataset, predicted: dict[str, np.ndarray]) -> View
         channels[c] = ChannelViews(
             channel=c, residual=r, sigma=sd,
             bins={k: binned(v, z) for k, v in kept.items()},
-            acf=autocorrelation(r), ljung_box_q=q, ljung_box_p=p, tau=integrated_time(r),
+            acf=autocorrelation(r, MAX_LAG), ljung_box_q=q, ljung_box_p=p, tau=integrated_time(r),
             lag_samples=lag_of(np.where(valid, y, 0.0), np.where(valid, yhat, 0.0)),
         )
     views = Views(channels, kept)

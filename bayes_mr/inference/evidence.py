@@ -65,7 +65,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import logsumexp
 
-from .mcmc import MCMCResult, MCMCSettings, integrated_times, sample
+from ..stats import integrated_times
+from .mcmc import MCMCResult, MCMCSettings, sample
 
 #: Routes in order of preference for model selection.
 PREFERENCE = ("ti", "laplace")

@@ -38,6 +38,7 @@ from scipy.stats import qmc
 
 from ..likelihood import OutputError
 from ..simulate import Inputs, simulate
+from ..stats import hac_bandwidth
 
 #: Parameters in which the restoring force is linear, given the hysteretic state.
 LINEAR_FORM = {
@@ -257,30 +258,6 @@ def candidates(lik: OutputError, n: int, seed: int) -> np.ndarray:
 
 # --- covariance -------------------------------------------------------------------------
 
-#: Bartlett bandwidth of the sandwich as a fraction of the record length.
-HAC_FRACTION = 1 / 20
-
-
-def _bandwidth(r: np.ndarray, max_lag: int) -> int:
-    """Bartlett bandwidth [samples]: 1/40 of the record, or longer if the residuals need it.
-
-    A bandwidth from the residual autocorrelation alone is too short: a small
-    but long-lived correlation (a structure's response to process noise, a
-    few % of the residual at each lag) is coherent with the parameter
-    sensitivities and inflates the variance of the score several times. 1/40
-    of the record spans many periods of any mode the record can identify and
-    leaves ~40 blocks for the estimate.
-    """
-    r = r - r.mean(axis=0)
-    n = r.shape[0]
-    f = np.fft.rfft(r, 2 * n, axis=0)
-    acf = np.fft.irfft(f * np.conj(f), axis=0)[: max_lag + 1].sum(axis=1)
-    acf = acf / acf[0] if acf[0] > 0 else acf
-    below = np.flatnonzero(np.abs(acf) < 0.05)
-    from_acf = int(below[0]) if below.size else max_lag
-    return int(min(max_lag, max(from_acf, round(HAC_FRACTION * n), 1)))
-
-
 def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, int]:
     """Sandwich covariance (JᵀJ)⁻¹ Ω (JᵀJ)⁻¹ with a Bartlett-weighted Ω.
 
@@ -302,7 +279,7 @@ def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, 
     p = J.shape[1]
     c = r.size // n_t
     g = (J * r[:, None]).reshape(n_t, c, p).sum(axis=1)  # score contribution of each sample
-    lag = _bandwidth(r.reshape(n_t, c), max_lag=min(n_t // 4, 5000))
+    lag = hac_bandwidth(r.reshape(n_t, c), max_lag=min(n_t // 4, 5000))
     m = 2 * n_t
     G = np.fft.rfft(g, m, axis=0)
     omega = np.zeros((p, p))

@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time as _time
 import warnings
 from collections.abc import Callable, Sequence
@@ -57,7 +56,9 @@ from pathlib import Path
 import emcee
 import numpy as np
 
+from ..progress import bar as progress_bar
 from ..scores import score
+from ..stats import integrated_times
 
 
 class Snooker(emcee.moves.DESnookerMove):
@@ -266,27 +267,6 @@ def rhat_ess(chain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rhat, ess
 
 
-def integrated_times(chain: np.ndarray) -> np.ndarray:
-    """Integrated autocorrelation time of each coordinate [steps] (never raises).
-
-    ``chain`` has shape (n_steps, n_walkers, d). A walker that never moved
-    has no autocorrelation function; it is left out of its coordinate's
-    average (and if no walker moved, τ = ∞: nothing is converged).
-    """
-    chain = np.asarray(chain, float)
-    if chain.shape[0] < 2:
-        return np.full(chain.shape[-1], np.inf)
-    moving = np.ptp(chain, axis=0) > 0  # (n_walkers, d)
-    if moving.all():
-        return np.atleast_1d(emcee.autocorr.integrated_time(chain, tol=0, quiet=True))
-    tau = np.full(chain.shape[-1], np.inf)
-    for j in range(chain.shape[-1]):
-        if moving[:, j].any():
-            tau[j] = float(emcee.autocorr.integrated_time(chain[:, moving[:, j], j][:, :, None], tol=0,
-                                                          quiet=True)[0])
-    return tau
-
-
 def diagnose(chain: np.ndarray, settings: MCMCSettings) -> dict:
     """Burn-in, τ, R-hat, ESS and the convergence verdict (module docstring rule).
 
@@ -373,16 +353,6 @@ def initial_walkers(
     raise RuntimeError(
         f"{todo.size} of {n_walkers} walkers have no finite log-density after {max_rounds} draws around "
         f"the starting point; check that it lies inside the prior box")
-
-
-def _progress_bar(settings: MCMCSettings, start: int):
-    show = settings.progress if settings.progress is not None else sys.stderr.isatty()
-    if not show:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=settings.max_steps, initial=start, file=sys.stderr, unit="step", desc="emcee",
-                dynamic_ncols=True, leave=False)
 
 
 def sample(
@@ -472,31 +442,28 @@ def sample(
     it = int(sampler.iteration)
     history: list[dict] = []
     diag = None
-    bar = _progress_bar(settings, it)
+    bar = progress_bar(settings.max_steps, "emcee", unit="step", enabled=settings.progress, initial=it)
     try:
         while True:
             if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps):
                 diag = diagnose(sampler.get_chain(), settings)
                 history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
                                     "rhat_max": float(diag["rhat"].max())})
-                if bar is not None:
-                    bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
-                                    N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
-                                    rhat=f"{diag['rhat'].max():.3f}")
+                bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
+                                N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
+                                rhat=f"{diag['rhat'].max():.3f}")
                 if diag["converged"] or it >= settings.max_steps:
                     break
             target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
             # one step at a time through the generator so the bar moves; the backend saves every step
             steps = sampler.sample(state, iterations=target - it, skip_initial_state_check=resuming)
             for new_state in steps:
-                if bar is not None:
-                    bar.update(1)
+                bar.update(1)
             state = new_state
             it = target
             resuming = False
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
 
     chain = sampler.get_chain()
     lp = sampler.get_log_prob()

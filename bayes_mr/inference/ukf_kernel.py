@@ -25,8 +25,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-
-from ..models.kernel import L_KIND, L_NS, STRUCT, K_MASS, advance, deriv, rate, substeps
+from ..models.kernel import K_MASS, L_KIND, L_NS, STRUCT, advance, deriv, rate, substeps
 
 # status codes of a run
 OK = 0

@@ -43,9 +43,10 @@ import xarray as xr
 
 from ..inference import ukf
 from ..inference import ukf_kernel as K
-from ..inference.ukf import TAUS, Problem, Prior, UKFSettings
+from ..inference.ukf import TAUS, Prior, Problem, UKFSettings
 from ..likelihood import channel_noise
 from ..models import Model, get_model
+from ..progress import bar as progress_bar
 
 #: Channels whose noise SD the filter uses, by kind of test.
 _NOISE_CHANNELS = {
@@ -166,13 +167,6 @@ def _default_chunk(n_runs: int, executor) -> int:
     return max(1, math.ceil(n_runs / 20))
 
 
-def _progress_bar(total: int, desc: str, enabled: bool):
-    from tqdm import tqdm
-
-    disable = not enabled or not sys.stderr.isatty()
-    return tqdm(total=total, desc=desc, unit="run", file=sys.stderr, disable=disable, leave=False)
-
-
 def _settings_json(settings: UKFSettings) -> str:
     d = dataclasses.asdict(settings)
     d["points"]["name"] = type(settings.points).__name__
@@ -283,7 +277,7 @@ def train(
 
     finished: list[tuple[list[int], dict]] = []
     interrupted = False
-    bar = _progress_bar(n_runs, f"UKF training {model.name}", progress)
+    bar = progress_bar(n_runs, f"UKF training {model.name}", unit="run", enabled=bool(progress))
     with bar, _StopOnInterrupt(lambda msg: bar.write(msg, file=sys.stderr)) as stop:
 
         def collect(idx, out):

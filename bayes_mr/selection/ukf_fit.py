@@ -20,8 +20,8 @@ from ..data.schema import OUTPUTS
 from ..inference.ukf import TAUS, UKFSettings
 from ..likelihood import LOG_2PI, channel_noise
 from ..models import Model, get_model
-from ..simulate import OUTPUT_NAMES, Inputs, simulate
 from ..scores import score
+from ..simulate import OUTPUT_NAMES, Inputs, simulate
 from .training import settings_from_json, to_theta
 from .validation import _BATCH_BYTES, full_theta, method1, method2
 

@@ -26,8 +26,8 @@ import xarray as xr
 
 from ..inference import ukf_kernel as K
 from ..models import Model, get_model
-from ..simulate import OUTPUT_NAMES, Inputs, simulate
 from ..scores import Scorer
+from ..simulate import OUTPUT_NAMES, Inputs, simulate
 from .training import settings_from_json, train
 
 #: Score variables of a validation Dataset (per run).
