@@ -126,10 +126,15 @@ def cmd_fit(args) -> int:
     from .identify import Identify, engine
 
     rec = _read(args.data, args)
-    est = engine(args.engine)
-    validate_on = _read(args.validate, args) if getattr(args, "validate", None) else None
-    job = Identify(args.model, est, ranges=_ranges(args.prior), fixed=_floats(args.fix, "--fix"))
-    idata = job.fit(rec, seed=args.seed, progress=not args.quiet, validate_on=validate_on)
+    options = {}
+    if getattr(args, "validate", None):
+        if args.engine != "ukf":
+            raise CLIError("--validate chooses among trained UKF runs (thesis method 2): use it with --engine ukf, "
+                           "or score a fit on another record with `bayes-mr validate RESULT.nc DATA2`")
+        options["validate_on"] = _read(args.validate, args)
+    job = Identify(args.model, engine(args.engine, **options), ranges=_ranges(args.prior),
+                   fixed=_floats(args.fix, "--fix"))
+    idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
     summary = results.summary_of(idata).to_dict()
     if args.output:
         results.save(idata, args.output)

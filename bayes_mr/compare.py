@@ -32,7 +32,8 @@ import pandas as pd
 import xarray as xr
 
 from . import results
-from .identify import Identify, engine
+from .identify import Identify
+from .inference.estimators import engine
 from .identify import validate as validate_fit
 from .models import get_model
 from .progress import say as progress_say
@@ -80,6 +81,26 @@ def crosscheck(ukf_idata, mcmc_idata) -> dict[str, dict[str, float]]:
     return out
 
 
+def _fit_row(job: Identify, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
+             progress) -> tuple[dict, object]:
+    """(row, InferenceData) of one model × engine; a failed fit is a row with ``error`` and no result."""
+    t0 = _time.perf_counter()
+    name = get_model(job.model).name
+    try:
+        idata = job.fit(record, seed=seed, progress=bool(progress))
+    except (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        return {"model": name, "engine": job.estimator.name, "error": f"{type(exc).__name__}: {exc}",
+                "wall_s": _time.perf_counter() - t0}, None
+    row = results.summary_of(idata).to_dict()
+    if validate is not None:
+        try:
+            v = validate_fit(idata, validate)
+            row["validation"] = {k: v[k] for k in ("mse", "force_errors", "force_nrmse", "rmse", "masked")}
+        except ValueError as exc:
+            row["validation"] = {"error": str(exc)}
+    return row, idata
+
+
 def compare(
     record: xr.Dataset,
     models: Sequence[str],
@@ -109,7 +130,7 @@ def compare(
         Write each fit as ``MODEL__ENGINE.nc`` and the table as ``compare.csv``.
     estimators : dict, optional
         Engine name → configured estimator (e.g. ``{"ukf": UKF(n_lhs=4)}``)
-        overriding the defaults of :func:`bayes_mr.identify.engine`.
+        overriding the defaults of :func:`bayes_mr.inference.estimators.engine`.
 
     Returns
     -------
@@ -134,25 +155,13 @@ def compare(
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     for m in models:
         for e in engines:
-            t0 = _time.perf_counter()
             say(f"{m} × {e} …")
-            est = estimators.get(e) or engine(e)
-            try:
-                idata = Identify(m, est).fit(record, seed=seed, progress=bool(progress))
-            except (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-                rows.append({"model": m, "engine": e, "error": f"{type(exc).__name__}: {exc}",
-                             "wall_s": _time.perf_counter() - t0})
-                say(f"{m} × {e}: failed ({exc})")
+            row, idata = _fit_row(Identify(m, estimators.get(e) or engine(e)), record, validate, seed, progress)
+            rows.append(row)
+            if idata is None:
+                say(f"{m} × {e}: failed ({row['error']})")
                 continue
             fits[(m, e)] = idata
-            row = results.summary_of(idata).to_dict()
-            if validate is not None:
-                try:
-                    v = validate_fit(idata, validate)
-                    row["validation"] = {k: v[k] for k in ("mse", "force_errors", "force_nrmse", "masked")}
-                except ValueError as exc:
-                    row["validation"] = {"error": str(exc)}
-            rows.append(row)
             if out_dir is not None:
                 results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")
             say(f"{m} × {e}: ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s")

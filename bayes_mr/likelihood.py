@@ -136,9 +136,13 @@ class Parameterisation:
 
     def full(self, phi: np.ndarray) -> np.ndarray:
         """Full θ (..., n_full) from free φ (..., p)."""
-        phi = np.asarray(phi, float)
-        out = np.broadcast_to(self.template, phi.shape[:-1] + self.template.shape).copy()
-        out[..., self.free_idx] = self.coords.to_theta(phi)
+        return self.full_theta(self.coords.to_theta(np.asarray(phi, float)))
+
+    def full_theta(self, theta: np.ndarray) -> np.ndarray:
+        """Full θ (..., n_full) from the free parameters θ (..., p) [SI]."""
+        theta = np.asarray(theta, float)
+        out = np.broadcast_to(self.template, theta.shape[:-1] + self.template.shape).copy()
+        out[..., self.free_idx] = theta
         return out
 
 
@@ -178,6 +182,8 @@ class OutputError:
             raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
         self.record = record
         self.kind = record.attrs["kind"]
+        self.fixed = {k: float(v) for k, v in (fixed or {}).items()}
+        self.ranges = {k: (float(v[0]), float(v[1])) for k, v in (ranges or {}).items()}
         self.scales = scales or record_scales(record)
         self.par = Parameterisation.build(model, self.kind, self.scales, ranges=ranges, fixed=fixed)
         self.model = self.par.model
@@ -236,13 +242,17 @@ class OutputError:
         return phi, sigma
 
     # --- model evaluation ------------------------------------------------------------
-    def simulate(self, phi: np.ndarray, schedule: np.ndarray | None = None) -> Simulation:
-        """Simulate the model for φ of shape (B, p) (or (p,))."""
-        return simulate(self.model, self.inputs, self.par.full(phi), schedule=schedule)
+    def simulate(self, phi: np.ndarray, schedule: np.ndarray | None = None, **options) -> Simulation:
+        """Simulate the model for φ of shape (B, p) (or (p,)).
 
-    def predict(self, phi: np.ndarray, schedule: np.ndarray | None = None) -> tuple[np.ndarray, Simulation]:
+        ``options`` go to :func:`bayes_mr.simulate.simulate` (sub-step control).
+        """
+        return simulate(self.model, self.inputs, self.par.full(phi), schedule=schedule, **options)
+
+    def predict(self, phi: np.ndarray, schedule: np.ndarray | None = None,
+                **options) -> tuple[np.ndarray, Simulation]:
         """Predicted measured channels, shape (B, N, n_channels), and the simulation."""
-        sim = self.simulate(np.atleast_2d(phi), schedule)
+        sim = self.simulate(np.atleast_2d(phi), schedule, **options)
         yhat = np.stack([sim[c] for c in self.channels], axis=-1)
         return yhat, sim
 
@@ -261,6 +271,15 @@ class OutputError:
         """
         phi, sigma = self.split(x)
         yhat, sim = self.predict(phi)
+        return self.log_density(yhat, sigma, sim.ok, pointwise=pointwise)
+
+    def log_density(self, yhat: np.ndarray, sigma: np.ndarray, ok: np.ndarray, *, pointwise: bool = False):
+        """ln p(y | ŷ, σ) of predictions ``yhat`` (B, N, n_channels) with noise SDs ``sigma`` (B, n_channels).
+
+        ``ok`` (B,) marks simulations that completed; the others get −inf.
+        With ``pointwise`` also returns the per-sample terms (B, N,
+        n_channels) (zero at invalid samples).
+        """
         # a simulation that blew up overflows here; its total is set to −inf below
         with np.errstate(over="ignore", invalid="ignore"):
             if pointwise:
@@ -277,7 +296,7 @@ class OutputError:
                 ssr = np.einsum("bnc,bnc->bc", d, d)
                 total = -0.5 * np.sum(ssr / sigma**2, axis=1) - self.n_valid * (
                     np.sum(np.log(sigma), axis=1) + 0.5 * len(self.channels) * LOG_2PI)
-        total = np.where(sim.ok & np.isfinite(total), total, -np.inf)
+        total = np.where(ok & np.isfinite(total), total, -np.inf)
         if pointwise:
             return total, terms
         return total

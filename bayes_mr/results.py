@@ -19,9 +19,15 @@ Every fit — UKF, emcee, least squares — is stored as an
 * engine-specific extra groups (``ukf_training``: every run's prior, final
   mean/covariance, evidence, status and parameter history).
 
-The JSON summary (SPEC keys) is kept as a string attribute ``summary`` of the
-``posterior`` group so that ``validate RESULT.nc`` can read the model, kind
-and engine back.
+The JSON summary (the ``fit`` keys of ``docs/CONTRACT.md``) is kept as a
+string attribute ``summary`` of the ``posterior`` group so that
+``validate RESULT.nc`` can read the model, kind and engine back.
+
+:func:`build` is the one place that turns an estimator's
+:class:`~bayes_mr.inference.base.Posterior` into this schema: it scores the
+engine's point estimate, thins the draws into the pointwise log-likelihood
+and the predictive draws, and writes the summary — the same way for every
+engine.
 """
 
 from __future__ import annotations
@@ -33,6 +39,12 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+
+from .data.schema import OUTPUTS
+from .inference.base import Posterior, even_indices
+from .likelihood import OutputError
+from .scores import score
+from .simulate import simulate
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore", FutureWarning)
@@ -63,6 +75,16 @@ class FitSummary:
         UKF runs that completed / failed.
     wall_s : float
         Wall time of the fit [s].
+    point : dict
+        A parameter set that simulates (the optimum, the maximum a
+        posteriori draw or the selected UKF run) [SI]; ``mse`` and the force
+        errors are its scores.
+    rmse : dict or None
+        Measured channel → RMS error of the point's prediction over the
+        scored samples [channel units].
+    noise_model : str
+        The residual model of the likelihood (``iid``: independent Gaussian
+        errors per channel).
     """
 
     model: str
@@ -78,9 +100,13 @@ class FitSummary:
     trained: int | None = None
     diverged: int | None = None
     wall_s: float = 0.0
+    point: dict[str, float] = field(default_factory=dict)
+    rmse: dict[str, float] | None = None
+    noise_model: str = "iid"
     extra: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """The summary as plain JSON-ready Python."""
         out = {
             "model": self.model,
             "engine": self.engine,
@@ -96,6 +122,8 @@ class FitSummary:
             "diverged": self.diverged,
             "wall_s": float(self.wall_s),
         }
+        out.update(point={k: float(v) for k, v in self.point.items()}, rmse=_jsonable(self.rmse),
+                   noise_model=self.noise_model)
         out.update(_jsonable(self.extra))
         return out
 
@@ -103,7 +131,7 @@ class FitSummary:
     def from_dict(cls, d: dict) -> "FitSummary":
         known = {k: d[k] for k in (
             "model", "engine", "kind", "params", "params_sd", "log_evidence", "mse", "force_errors",
-            "force_nrmse", "masked", "trained", "diverged", "wall_s") if k in d}
+            "force_nrmse", "masked", "trained", "diverged", "wall_s", "point", "rmse", "noise_model") if k in d}
         extra = {k: v for k, v in d.items() if k not in known}
         return cls(**known, extra=extra)
 
@@ -136,73 +164,138 @@ def write_json(data: dict, path: str | Path) -> Path:
     return path
 
 
-def make_inference_data(
-    *,
-    summary: FitSummary,
-    draws: np.ndarray,
-    names: tuple[str, ...],
-    units: tuple[str, ...],
-    point: np.ndarray,
-    record: xr.Dataset,
-    lp: np.ndarray | None = None,
-    log_likelihood: dict[str, np.ndarray] | None = None,
-    ll_index: np.ndarray | None = None,
-    predictive: dict[str, np.ndarray] | None = None,
-    sample_stats: dict[str, np.ndarray] | None = None,
-    extra_groups: dict[str, xr.Dataset] | None = None,
-    attrs: dict | None = None,
-) -> az.InferenceData:
-    """Assemble a fit into InferenceData.
+#: Draws whose pointwise log-likelihood is stored, samples it is stored on, predictive draws.
+LL_DRAWS = 100
+LL_SAMPLES = 2000
+PP_DRAWS = 20
+#: Draws simulated at once for the pointwise log-likelihood (memory: batch × N × channels).
+LL_BATCH = 24
+
+
+def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | None = None) -> az.InferenceData:
+    """The InferenceData of an estimator's posterior (the one builder for every engine).
 
     Parameters
     ----------
-    draws : ndarray, shape (chain, draw, p)
-        Posterior draws of θ [SI].
-    names, units : tuple of str
-        Parameter names and units, length p.
-    point : ndarray, shape (p,)
-        The engine's point estimate [SI].
-    record : xarray.Dataset
-        The fitted record (observed and constant data come from it).
-    lp : ndarray, shape (chain, draw), optional
-        Log posterior of each draw.
-    log_likelihood : dict, optional
-        Channel → pointwise log-density, shape (chain, draw_ll, n_obs), on the
-        samples ``ll_index`` (n_obs,) of the record.
-    predictive : dict, optional
-        Channel → simulated values, shape (chain, draw_pp, time).
-    sample_stats, extra_groups, attrs : optional
-        Engine-specific additions.
+    lik : OutputError
+        The binding of (model, record, noise model) the engine fitted.
+    post : Posterior
+        The engine's draws, point estimate, evidence and diagnostics.
+    noise_sd : dict, optional
+        Noise SD per measured channel for the MSE, overriding the record's.
+
+    Returns
+    -------
+    arviz.InferenceData
+        See the module docstring; the summary's ``mse``, force errors and
+        ``rmse`` are those of ``post.point`` on the fitted record (None when
+        it does not simulate there).
     """
-    draws = np.asarray(draws, float)
+    record = lik.record
+    names, units = lik.par.coords.names, lik.par.coords.units
+    sim = simulate(lik.model, lik.inputs, lik.par.full_theta(post.point)[None], **post.simulation)
+    if sim.ok.all():
+        scores = score(record, {k: v[0] for k, v in sim.outputs.items()}, noise_sd=noise_sd)
+    else:  # e.g. a UKF run chosen on another record that is unstable on this one: report, don't fail
+        scores = {"mse": None, "force_errors": None, "force_nrmse": None, "rmse": None}
+    flat = post.draws.reshape(-1, post.draws.shape[-1])
+    summary = FitSummary(
+        model=lik.model.name, engine=post.engine, kind=lik.kind,
+        params=dict(zip(names, flat.mean(axis=0))),
+        params_sd=dict(zip(names, flat.std(axis=0, ddof=post.params_sd_ddof))),
+        log_evidence=post.log_evidence, mse=scores["mse"], force_errors=scores["force_errors"],
+        force_nrmse=scores["force_nrmse"], masked=int((~lik.valid).sum()), trained=post.trained,
+        diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, post.point)), rmse=scores["rmse"],
+        noise_model="iid", extra=post.info,
+    )
+    ll, ll_index = pointwise_log_likelihood(lik, post)
+    return make_inference_data(summary, post, names, units, record, log_likelihood=ll, ll_index=ll_index,
+                               predictive=predictive_draws(lik, post))
+
+
+def pointwise_log_likelihood(lik: OutputError, post: Posterior) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Pointwise log-density of each measured channel at the first draws of ``post.x_draws``.
+
+    Returns
+    -------
+    ll : dict
+        Channel → array (chain, draw, obs): one chain of at most
+        :data:`LL_DRAWS` draws, or the engine's (chain, draw) grid when
+        ``post.x_chain`` gives one.
+    index : ndarray of int
+        The record samples (obs) the terms are stored on.
+    """
+    index = post.ll_time_index
+    if index is None:
+        valid = np.flatnonzero(lik.valid)
+        index = valid[even_indices(valid.size, LL_SAMPLES)]
+    x = post.x_draws if post.x_chain is not None else post.x_draws[:LL_DRAWS]
+    terms = np.empty((x.shape[0], index.size, len(lik.channels)))
+    for start in range(0, x.shape[0], LL_BATCH):
+        phi, sigma = lik.split(x[start: start + LL_BATCH])
+        yhat, sim = lik.predict(phi, **post.simulation)
+        _, t = lik.log_density(yhat, sigma, sim.ok, pointwise=True)
+        terms[start: start + LL_BATCH] = np.where(sim.ok[:, None, None] & np.isfinite(t[:, index]),
+                                                  t[:, index], -np.inf)
+    shape = post.x_chain if post.x_chain is not None else (1, x.shape[0])
+    terms = terms.reshape(*shape, index.size, len(lik.channels))
+    return {c: terms[..., j] for j, c in enumerate(lik.channels)}, index
+
+
+def predictive_draws(lik: OutputError, post: Posterior) -> dict[str, np.ndarray]:
+    """Simulated measured channels (and the damper force of a structure test) of a few draws.
+
+    Returns channel → array (1, draw, time) for :data:`PP_DRAWS` evenly
+    spaced rows of ``post.pp_draws`` when given, else the first rows of
+    ``post.x_draws``.
+    """
+    if post.pp_draws is not None:
+        x = post.pp_draws[even_indices(post.pp_draws.shape[0], PP_DRAWS)]
+    else:
+        x = post.x_draws[:PP_DRAWS]
+    phi, _ = lik.split(x)
+    yhat, sim = lik.predict(phi, **post.simulation)
+    pp = {c: yhat[None, :, :, j] for j, c in enumerate(lik.channels)}
+    if lik.kind == "structure":
+        pp["force"] = sim["force"][None]
+    return pp
+
+
+def _posterior_group(summary: FitSummary, post: Posterior, names, units, record: xr.Dataset) -> xr.Dataset:
+    draws = np.asarray(post.draws, float)
     posterior = xr.Dataset(
         {n: (("chain", "draw"), draws[:, :, j], {"units": u}) for j, (n, u) in enumerate(zip(names, units))},
         coords={"chain": np.arange(draws.shape[0]), "draw": np.arange(draws.shape[1])},
     )
     posterior.attrs.update(
-        summary=json.dumps(summary.to_dict()),
-        model=summary.model,
-        engine=summary.engine,
-        kind=summary.kind,
+        summary=json.dumps(summary.to_dict()), model=summary.model, engine=summary.engine, kind=summary.kind,
         source=str(record.attrs.get("source", "")),
-        **{k: v for k, v in (attrs or {}).items() if isinstance(v, (str, int, float))},
+        **{k: v for k, v in post.attrs.items() if isinstance(v, (str, int, float))},
     )
-    groups = {"posterior": posterior}
-    stats = dict(sample_stats or {})
-    if lp is not None:
-        stats["lp"] = np.asarray(lp, float)
-    if stats:
-        groups["sample_stats"] = xr.Dataset(
-            {k: (("chain", "draw") + tuple(f"{k}_dim_{i}" for i in range(np.ndim(v) - 2)), np.asarray(v))
-             for k, v in stats.items()},
-            coords={"chain": np.arange(draws.shape[0]), "draw": np.arange(np.asarray(next(iter(stats.values()))).shape[1])},
-        )
-    time = record["time"].values
-    from .data.schema import OUTPUTS
+    return posterior
 
-    channels = [c for c in OUTPUTS[record.attrs["kind"]] + ("force",) if c in record]
-    channels = list(dict.fromkeys(channels))
-    groups["observed_data"] = xr.Dataset(
+
+def _sample_stats_group(post: Posterior) -> xr.Dataset | None:
+    stats = dict(post.sample_stats)
+    if post.lp is not None:
+        stats["lp"] = np.asarray(post.lp, float)
+    if not stats:
+        return None
+    first = np.asarray(next(iter(stats.values())))
+    ds = xr.Dataset(
+        {k: (("chain", "draw") + tuple(f"{k}_dim_{i}" for i in range(np.ndim(v) - 2)), np.asarray(v))
+         for k, v in stats.items()},
+        coords={"chain": np.arange(first.shape[0]), "draw": np.arange(first.shape[1])},
+    )
+    ds.attrs.update(post.sample_stats_attrs)
+    return ds
+
+
+def _record_groups(record: xr.Dataset) -> dict[str, xr.Dataset]:
+    """``observed_data`` (measured channels) and ``constant_data`` (inputs, ``valid``) of a record."""
+    time = record["time"].values
+    channels = list(dict.fromkeys(c for c in OUTPUTS[record.attrs["kind"]] + ("force",) if c in record))
+    observed = xr.Dataset(
         {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in channels},
         coords={"time": time},
     )
@@ -210,7 +303,38 @@ def make_inference_data(
     const = {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in inputs}
     const["valid"] = ("time", record["valid"].values.astype(np.int8) if "valid" in record
                       else np.ones(time.size, np.int8))
-    groups["constant_data"] = xr.Dataset(const, coords={"time": time})
+    return {"observed_data": observed, "constant_data": xr.Dataset(const, coords={"time": time})}
+
+
+def make_inference_data(summary: FitSummary, post: Posterior, names: tuple[str, ...], units: tuple[str, ...],
+                        record: xr.Dataset, *, log_likelihood: dict[str, np.ndarray] | None = None,
+                        ll_index: np.ndarray | None = None,
+                        predictive: dict[str, np.ndarray] | None = None) -> az.InferenceData:
+    """Assemble a fit into InferenceData.
+
+    Parameters
+    ----------
+    summary : FitSummary
+        The ``fit`` JSON keys (stored as the posterior's ``summary`` attribute).
+    post : Posterior
+        Draws (chain, draw, p) of θ [SI], point estimate, ``lp``, engine
+        extras (``sample_stats``, ``groups``, ``attrs``).
+    names, units : tuple of str
+        Parameter names and units, length p.
+    record : xarray.Dataset
+        The fitted record (observed and constant data come from it).
+    log_likelihood : dict, optional
+        Channel → pointwise log-density, shape (chain, draw_ll, n_obs), on the
+        samples ``ll_index`` (n_obs,) of the record.
+    predictive : dict, optional
+        Channel → simulated values, shape (chain, draw_pp, time).
+    """
+    groups = {"posterior": _posterior_group(summary, post, names, units, record)}
+    stats = _sample_stats_group(post)
+    if stats is not None:
+        groups["sample_stats"] = stats
+    groups.update(_record_groups(record))
+    time = record["time"].values
     if log_likelihood:
         idx = np.asarray(ll_index)
         first = np.asarray(next(iter(log_likelihood.values())))
@@ -226,16 +350,15 @@ def make_inference_data(
             coords={"chain": np.arange(first.shape[0]), "draw": np.arange(first.shape[1]), "time": time},
         )
     groups["point_estimate"] = xr.Dataset(
-        {"theta": ("param", np.asarray(point, float)), "units": ("param", list(units))},
+        {"theta": ("param", np.asarray(post.point, float)), "units": ("param", list(units))},
         coords={"param": list(names)},
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # non-standard group names are intended
         idata = az.InferenceData(**groups)
-        for name, ds in (extra_groups or {}).items():
+        for name, ds in post.groups.items():
             idata.add_groups({name: ds})
     return idata
-
 
 def save(idata: az.InferenceData, path: str | Path) -> Path:
     """Write InferenceData to netCDF atomically."""
@@ -247,7 +370,7 @@ def save(idata: az.InferenceData, path: str | Path) -> Path:
     return path
 
 
-def load(path: str | Path) -> az.InferenceData:
+def load_result(path: str | Path) -> az.InferenceData:
     """Read a result written by :func:`save` (fails clearly on anything else)."""
     path = Path(path)
     if not path.exists():

@@ -113,7 +113,9 @@ class Scorer:
         -------
         dict
             ``mse`` (float), ``force_errors`` (``{"E_t", "E_x", "E_xdot"}`` or
-            None), ``force_nrmse`` (float or None), ``n`` (valid samples).
+            None), ``force_nrmse`` (float or None), ``rmse`` (measured channel →
+            RMS error over the valid samples [channel units]), ``n`` (valid
+            samples).
 
         Raises
         ------
@@ -136,7 +138,9 @@ class Scorer:
             f_hat = predicted["force"]
             errors = force_errors(self.force, f_hat, self.xdot, self.xddot, valid=self.valid)
             nrmse = force_nrmse(self.force, f_hat, valid=self.valid)
-        return {"mse": value, "force_errors": errors, "force_nrmse": nrmse, "n": self.n}
+        rmse = {c: float(np.sqrt(np.mean((self.y[c][self.valid] - np.asarray(predicted[c], float)[self.valid]) ** 2)))
+                for c in self.channels}
+        return {"mse": value, "force_errors": errors, "force_nrmse": nrmse, "rmse": rmse, "n": self.n}
 
 
 def _force_mse(f: np.ndarray, f_hat: np.ndarray, sigma_f: float, valid: np.ndarray) -> float:
@@ -167,6 +171,6 @@ def score(record: xr.Dataset, predicted: dict[str, np.ndarray], *, noise_sd: dic
     Returns
     -------
     dict
-        ``mse``, ``force_errors`` (or None), ``force_nrmse`` (or None), ``n``.
+        ``mse``, ``force_errors`` (or None), ``force_nrmse`` (or None), ``rmse``, ``n``.
     """
     return Scorer(record, noise_sd=noise_sd)(predicted)

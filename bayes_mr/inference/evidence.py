@@ -110,7 +110,7 @@ class Evidence:
                 "wall_s": float(self.wall_s)}
 
 
-def select(routes: dict[str, Evidence]) -> Evidence:
+def select_route(routes: dict[str, Evidence]) -> Evidence:
     """The route that decides a model comparison (first of :data:`PREFERENCE` present)."""
     for name in PREFERENCE:
         if name in routes:

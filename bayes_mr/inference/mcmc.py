@@ -5,8 +5,8 @@ with :class:`emcee.EnsembleSampler` (``vectorize=True``: every proposal of a
 half-ensemble is one call, so one compiled batched simulation serves all
 walkers); :func:`fit_mcmc` applies it to an
 :class:`~bayes_mr.likelihood.OutputError` posterior, starting the walkers at
-the least-squares optimum; :func:`to_inference_data` stores the result in the
-package's InferenceData schema (:mod:`bayes_mr.results`).
+the least-squares optimum; :func:`bayes_mr.inference.mcmc_posterior.mcmc_posterior`
+turns the chain into the engines' common :class:`~bayes_mr.inference.base.Posterior`.
 
 Run length (checked every ``check_every`` steps, at multiples of it, so an
 interrupted and resumed run takes the same decisions):
@@ -22,7 +22,7 @@ interrupted and resumed run takes the same decisions):
    is below ``rhat_max``; otherwise continue, up to ``max_steps``.
 
 Moves: differential evolution (80 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and
-the DE snooker update (20 %, :class:`Snooker`). Both are affine-invariant
+the DE snooker update (20 %, :class:`~bayes_mr.inference.moves.Snooker`). Both are affine-invariant
 like the stretch move, but DE's scale is the optimal one for Gaussian targets
 in d dimensions while the stretch move's efficiency falls with d. Measured on
 a correlated 6-d Gaussian (scales over three decades, 24 walkers): integrated
@@ -31,7 +31,7 @@ share is kept because it makes the Monte Carlo errors honest: over 24 seeds
 on a 4-d Gaussian at 50 τ, (mean − truth)/MCSE has SD 1.3–1.4 with DE alone
 (τ of a pure-DE ensemble is underestimated) and 1.0–1.2 with the mixture;
 and it moves along lines through other walkers, which helps on curved ridges.
-emcee 3.1.6's own ``DESnookerMove`` is wrong (see :class:`Snooker`) and is
+emcee 3.1.6's own ``DESnookerMove`` is wrong (see :class:`~bayes_mr.inference.moves.Snooker`) and is
 not used.
 
 Randomness: ``seed`` → :class:`numpy.random.SeedSequence`; one child seeds the
@@ -46,9 +46,7 @@ uninterrupted one bit for bit.
 from __future__ import annotations
 
 import json
-import math
 import time as _time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -57,44 +55,9 @@ import emcee
 import numpy as np
 
 from ..progress import bar as progress_bar
-from ..scores import score
-from ..stats import integrated_times
+from .convergence import convergence_check
+from .moves import MOVES
 
-
-class Snooker(emcee.moves.DESnookerMove):
-    """DE snooker update (ter Braak & Vrugt 2008) with emcee 3.1.6's two errors fixed.
-
-    emcee 3.1.6 projects on ``(s − z)/√|s − z|`` instead of the unit vector
-    and uses ½(d − 1) in the Hastings factor; its chain is not stationary at
-    the target (on a 4-d Gaussian it under-disperses, E[χ²] 15 MCSE low —
-    ``tests/test_mcmc.py``). Fixed upstream after 3.1.6 (dfm/emcee#531);
-    this is the corrected proposal, so the pinned emcee can stay.
-    """
-
-    def get_proposal(self, s, c, random):
-        ns, ndim = s.shape
-        q = np.empty_like(s)
-        log_factor = np.empty(ns)
-        for i in range(ns):
-            w = np.array([c[j][random.randint(len(c[j]))] for j in range(3)])
-            random.shuffle(w)
-            z, z1, z2 = w
-            delta = s[i] - z
-            norm = np.linalg.norm(delta)
-            u = delta / norm
-            q[i] = s[i] + u * self.gammas * (np.dot(u, z1) - np.dot(u, z2))
-            log_factor[i] = (ndim - 1.0) * (np.log(np.linalg.norm(q[i] - z)) - np.log(norm))
-        return q, log_factor
-
-
-#: Move names accepted in :attr:`MCMCSettings.moves`. ``emcee_snooker`` is emcee 3.1.6's biased
-#: DESnookerMove, kept only so the test can show the bias.
-MOVES = {
-    "de": emcee.moves.DEMove,
-    "snooker": Snooker,
-    "stretch": emcee.moves.StretchMove,
-    "emcee_snooker": emcee.moves.DESnookerMove,
-}
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
 
@@ -241,54 +204,6 @@ class MCMCResult:
 
 
 # --- diagnostics -----------------------------------------------------------------
-
-def _quiet_arviz():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)
-        import arviz as az
-    return az
-
-
-def rhat_ess(chain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rank-normalised split R-hat and bulk ESS per coordinate (walkers as chains).
-
-    Parameters
-    ----------
-    chain : ndarray, shape (n_steps, n_walkers, d)
-
-    Returns
-    -------
-    rhat, ess : ndarray (d,)
-    """
-    az = _quiet_arviz()
-    x = np.moveaxis(np.asarray(chain, float), 1, 0)  # (walker, step, d)
-    rhat = np.array([float(az.rhat(x[:, :, j], method="rank")) for j in range(x.shape[2])])
-    ess = np.array([float(az.ess(x[:, :, j], method="bulk")) for j in range(x.shape[2])])
-    return rhat, ess
-
-
-def diagnose(chain: np.ndarray, settings: MCMCSettings) -> dict:
-    """Burn-in, τ, R-hat, ESS and the convergence verdict (module docstring rule).
-
-    Parameters
-    ----------
-    chain : ndarray, shape (n_steps, n_walkers, d)
-    settings : MCMCSettings
-
-    Returns
-    -------
-    dict with ``burn``, ``tau`` (d,), ``rhat`` (d,), ``ess`` (d,), ``converged``.
-    """
-    n = chain.shape[0]
-    tau0 = float(np.max(integrated_times(chain[n // 2:])))
-    burn = n // 2 if not np.isfinite(tau0) else int(min(math.ceil(settings.burn_tau_multiple * tau0), n // 2))
-    post = chain[burn:]
-    tau = integrated_times(post)
-    rhat, ess = rhat_ess(post)
-    long_enough = bool(np.all(np.isfinite(tau))) and post.shape[0] >= settings.min_tau_multiple * float(np.max(tau))
-    converged = bool(long_enough and np.all(rhat < settings.rhat_max))
-    return {"burn": burn, "tau": tau, "rhat": rhat, "ess": ess, "converged": converged}
-
 
 # --- sampling --------------------------------------------------------------------
 
@@ -446,7 +361,7 @@ def sample(
     try:
         while True:
             if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps):
-                diag = diagnose(sampler.get_chain(), settings)
+                diag = convergence_check(sampler.get_chain(), settings)
                 history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
                                     "rhat_max": float(diag["rhat"].max())})
                 bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
@@ -558,139 +473,3 @@ def fit_mcmc(lik, *, lsq=None, settings: MCMCSettings = MCMCSettings(), lsq_sett
 
 
 # --- results ----------------------------------------------------------------------------
-
-def _even(n_have: int, n_want: int) -> np.ndarray:
-    """``min(n_want, n_have)`` evenly spaced indices into ``range(n_have)``."""
-    return np.unique(np.linspace(0, n_have - 1, min(n_want, n_have)).round().astype(int))
-
-
-def to_inference_data(lik, result: MCMCResult, lsq=None, *, evidence=None, record=None,
-                      n_ll_draws: int = 200, n_ll_samples: int = 2000, n_predictive: int = 20):
-    """The package's InferenceData (:mod:`bayes_mr.results`) of an emcee posterior.
-
-    Parameters
-    ----------
-    lik : OutputError
-        The posterior that was sampled.
-    result : MCMCResult
-        Its chain (coordinates x = [φ, ln σ_c]).
-    lsq : LSQResult, optional
-        The least-squares fit the walkers started from (reported beside).
-    evidence : Evidence or dict of str → Evidence, optional
-        Evidence routes; with a dict the selecting one is
-        :func:`bayes_mr.inference.evidence.select` of it and the others are
-        reported beside it (``summary.extra["evidence_routes"]`` and the
-        ``evidence`` group).
-    record : xarray.Dataset, optional
-        The fitted record (default ``lik.record``).
-    n_ll_draws, n_ll_samples : int
-        Pointwise log-likelihood on at most this many draws (all walkers ×
-        evenly spaced draws) and evenly spaced valid samples.
-    n_predictive : int
-        Draws simulated for ``posterior_predictive``.
-
-    Returns
-    -------
-    arviz.InferenceData
-        ``posterior`` θ [SI] per free parameter, dims (chain = walker, draw)
-        from the post-burn-in chain thinned by ``result.thin``;
-        ``sample_stats`` ``lp`` with attributes ``rhat``, ``ess``, ``tau``
-        (per coordinate, names in ``coordinates``); ``point_estimate`` the
-        maximum-posterior step; the FitSummary scores are those of that point.
-    """
-    from .. import results
-    from .evidence import Evidence, select
-
-    record = lik.record if record is None else record
-    coords = lik.par.coords
-    p = lik.n_params
-    kept = result.chain[result.burn:: result.thin]  # (n_draw, W, d)
-    lp = result.log_prob[result.burn:: result.thin]
-    x = np.moveaxis(kept, 1, 0)  # (W, n_draw, d)
-    draws = coords.to_theta(x[:, :, :p])
-    # the point the engine stands behind: the highest posterior density visited after burn-in
-    post_lp = result.log_prob[result.burn:]
-    i, w = np.unravel_index(int(np.argmax(post_lp)), post_lp.shape)
-    x_map = result.chain[result.burn + i, w]
-    point = coords.to_theta(x_map[:p])
-
-    # pointwise log-likelihood: every walker at a few evenly spaced draws, on evenly spaced valid samples
-    W, n_draw = x.shape[0], x.shape[1]
-    d_idx = _even(n_draw, max(1, n_ll_draws // W))
-    valid_idx = np.flatnonzero(lik.valid)
-    t_idx = valid_idx[_even(valid_idx.size, n_ll_samples)]
-    xs = x[:, d_idx].reshape(-1, x.shape[-1])
-    terms_t = np.empty((xs.shape[0], t_idx.size, len(lik.channels)))
-    for s in range(0, xs.shape[0], 24):
-        _, terms = lik.log_likelihood(xs[s: s + 24], pointwise=True)
-        terms_t[s: s + 24] = terms[:, t_idx, :]
-    terms_t = terms_t.reshape(W, d_idx.size, t_idx.size, -1)
-    ll = {c: terms_t[..., j] for j, c in enumerate(lik.channels)}
-
-    flat = x.reshape(-1, x.shape[-1])
-    pp_idx = _even(flat.shape[0], n_predictive)
-    yhat, sim = lik.predict(flat[pp_idx, :p])
-    pp = {c: yhat[None, :, :, j] for j, c in enumerate(lik.channels)}
-    if lik.kind == "structure":
-        pp["force"] = sim["force"][None]
-
-    _, sim_map = lik.predict(x_map[:p])
-    predicted = {k: v[0] for k, v in sim_map.outputs.items()}
-    scores = score(record, predicted)
-
-    routes: dict = {}
-    if isinstance(evidence, Evidence):
-        routes = {evidence.route: evidence}
-        chosen = evidence
-    elif evidence:
-        routes = dict(evidence)
-        chosen = select(routes)
-    else:
-        chosen = None
-    sigma = np.exp(flat[:, p:]).mean(axis=0) if lik.noise == "sampled" else np.asarray(lik.noise_sd, float)
-    flat_theta = draws.reshape(-1, p)
-    wall = result.wall_s + (lsq.wall_s if lsq is not None else 0.0) + max(
-        [e.wall_s for e in routes.values() if e.route != "laplace"] or [0.0])
-    extra = {
-        "evidence_route": chosen.route if chosen is not None else None,
-        "evidence_routes": {k: e.to_dict() for k, e in routes.items()},
-        "sigma": dict(zip(lik.channels, sigma)),
-        "map": dict(zip(coords.names, point)),
-        "n_steps": result.n_steps, "n_walkers": result.n_walkers, "burn": result.burn, "thin": result.thin,
-        "tau_max": float(np.max(result.tau)), "rhat_max": float(np.max(result.rhat)),
-        "ess_min": float(np.min(result.ess)), "acceptance": float(np.mean(result.acceptance)),
-        "converged": bool(result.converged), "seed_entropy": result.seed_entropy,
-    }
-    if lsq is not None:
-        extra["lsq_optimum"] = dict(lsq.theta)
-    summary = results.FitSummary(
-        model=lik.model.name, engine="mcmc", kind=lik.kind,
-        params=dict(zip(coords.names, flat_theta.mean(axis=0))),
-        params_sd=dict(zip(coords.names, flat_theta.std(axis=0, ddof=1))),
-        log_evidence=None if chosen is None else float(chosen.log_z),
-        mse=scores.get("mse"), force_errors=scores.get("force_errors"), force_nrmse=scores.get("force_nrmse"),
-        masked=int((~lik.valid).sum()), wall_s=wall, extra=extra,
-    )
-    import xarray as xr
-
-    names = list(lik.names)
-    extra_groups = {"mcmc_diagnostics": xr.Dataset(
-        {"rhat": ("coordinate", result.rhat), "ess": ("coordinate", result.ess),
-         "tau": ("coordinate", result.tau), "acceptance": ("walker", result.acceptance)},
-        coords={"coordinate": names}, attrs={"burn": result.burn, "thin": result.thin,
-                                             "n_steps": result.n_steps, "converged": int(result.converged)})}
-    if routes:
-        order = list(routes)
-        extra_groups["evidence"] = xr.Dataset(
-            {k: ("route", np.array([getattr(routes[r], k) for r in order], float))
-             for k in ("log_z", "mc_error", "ladder_error", "total_error", "wall_s")},
-            coords={"route": order}, attrs={"selected": chosen.route})
-    idata = results.make_inference_data(
-        summary=summary, draws=draws, names=coords.names, units=coords.units, point=point, record=record,
-        lp=np.moveaxis(lp, 1, 0), log_likelihood=ll, ll_index=t_idx, predictive=pp,
-        extra_groups=extra_groups, attrs={"seed_entropy": result.seed_entropy},
-    )
-    idata.sample_stats.attrs.update(
-        coordinates=",".join(names), rhat=np.asarray(result.rhat, float), ess=np.asarray(result.ess, float),
-        tau=np.asarray(result.tau, float), burn=int(result.burn), thin=int(result.thin))
-    return idata

@@ -18,11 +18,10 @@ import time as _time
 from dataclasses import dataclass, field
 
 import numpy as np
-import xarray as xr
 from scipy.stats import qmc
 
-from ..likelihood import Parameterisation, channel_noise, record_scales
-from ..models import Model, Scales, get_model
+from ..likelihood import OutputError, channel_noise
+from ..models import Model, Scales
 from ..models.params import Coordinates
 from ..simulate import Inputs
 from . import ukf_kernel as K
@@ -100,57 +99,41 @@ class Problem:
     scales: Scales
 
 
-def make_problem(
-    model: Model | str,
-    record: xr.Dataset,
-    *,
-    settings: UKFSettings = UKFSettings(),
-    ranges: dict[str, tuple[float, float]] | None = None,
-    fixed: dict[str, float] | None = None,
-    noise_sd: dict[str, float] | None = None,
-) -> Problem:
-    """Prepare (model, record) for filtering.
+def make_problem(lik: OutputError, settings: UKFSettings = UKFSettings()) -> Problem:
+    """Prepare the binding of (model, record, noise) for filtering.
 
     Parameters
     ----------
-    ranges : dict, optional
-        Plausible ranges (SI) overriding the record-scaled defaults.
-    fixed : dict, optional
-        Parameters held fixed (besides the form's redundant ones), name → value.
-    noise_sd : dict, optional
-        Measurement noise SD per measured channel, overriding the record's.
+    lik : OutputError
+        The likelihood every engine shares: its measured channels, valid
+        mask, record scales, parameterisation (plausible ranges, fixed
+        parameters) and measurement-noise SDs (``lik.noise_sd``, the
+        filter's R) are the filter's.
+    settings : UKFSettings
+        Process-noise intensities of the hysteretic states.
     """
-    model = get_model(model)
-    kind = record.attrs["kind"]
+    model, kind = lik.model, lik.kind
     if model.effect("sensor_delay"):
         raise ValueError(
             "sensor_delay delays a measured channel after the dynamics; the UKF engine filters states "
             "sample by sample and cannot estimate it — use --engine lsq or mcmc"
         )
-    inputs = Inputs.from_record(record)
-    channels = ("displacement", "acceleration") if kind == "structure" else ("force",)
-    yobs = np.column_stack([record[c].values for c in channels])
-    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(inputs.n, bool)
-    scales = record_scales(record)
-    par = Parameterisation.build(model, kind, scales, ranges=ranges, fixed=fixed)
+    par = lik.par
     coords, template, free = par.coords, par.template, par.free_idx
-    sd = channel_noise(record, channels)
-    if noise_sd:
-        sd = np.array([noise_sd.get(c, s) for c, s in zip(channels, sd)])
-    R = np.diag(sd**2)
-    h = inputs.dt
+    R = np.diag(np.asarray(lik.noise_sd, float) ** 2)
+    h = lik.inputs.dt
     mid = coords.to_theta(0.5 * (coords.phi_lower + coords.phi_upper))
     theta_mid = template.copy()
     theta_mid[free] = mid
-    sscale = model.state_scales(kind, theta_mid, scales)
+    sscale = model.state_scales(kind, theta_mid, lik.scales)
     q = (settings.state_walk * sscale) ** 2 * h
     p0 = (1e-3 * sscale) ** 2
     if kind == "structure":
         # the ground acceleration is measured with noise: it drives x, ẋ as process noise
-        sd_ag = float(channel_noise(record, ("ground_acceleration",))[0])
+        sd_ag = float(channel_noise(lik.record, ("ground_acceleration",))[0])
         q[0] = (sd_ag * h * h / 2) ** 2
         q[1] = (sd_ag * h) ** 2
-    return Problem(model, kind, inputs, yobs, valid, coords, template, free, R, q, p0, scales)
+    return Problem(model, kind, lik.inputs, lik.y, lik.valid, coords, template, free, R, q, p0, lik.scales)
 
 
 def lhs_priors(coords: Coordinates, n_lhs: int = 10, taus=TAUS, *, seed: int | np.random.Generator = 0) -> list[Prior]:

@@ -1,6 +1,6 @@
 """Model training (thesis §3.6.1): the UKF from every LHS × τ prior, as one labelled Dataset.
 
-:func:`train` builds the filtering problem of (model, record), draws the
+:func:`train` builds the filtering problem of a likelihood (model, record, noise), draws the
 thesis's priors — ``n_lhs`` Latin-hypercube means × the indices of dispersion
 τ (3-42, 3-43), 10 × 10 = 100 by default — and filters the record once per
 prior. Runs go in chunks:
@@ -23,8 +23,37 @@ executor, chunks that have not started are cancelled and chunks that finished
 meanwhile are kept.
 
 Thesis method 3 (both signals at once) is training on several records in one
-run: ``reset_records`` are filtered after ``record``, the model states
-restarting from rest at the start of each (see :func:`concat_records`).
+run: the records are concatenated (:func:`concat_records`) and the model
+states restart from rest at the start of each (``reset``).
+
+The training Dataset:
+
+    Dims ``run`` (prior index; a subset when interrupted), ``param``,
+    ``param_`` (second covariance axis), ``hist`` (history time points).
+
+    * ``lhs``, ``tau`` (run): prior labels;
+    * ``prior_mean`` (run, param): θ of the prior mean [SI];
+      ``prior_sd_phi``: its SD in the log-scaled coordinates φ;
+    * ``final_mean``, ``final_sd`` (run, param): filtered θ and its SD [SI]
+      (delta method: θ·sd_φ for log-scaled parameters, sd_φ/s for signed);
+      ``final_phi`` and ``final_cov_phi`` (run, param, param_): the
+      filter's final Gaussian on φ. For a diverged run these hold the
+      estimate when it stopped (possibly non-finite);
+    * ``log_evidence`` (run): innovation log-likelihood Σ ln N(y_k; ŷ_k⁻, P_yy,k)
+      (NaN for a diverged run, whose sum is partial);
+    * ``status`` (int code of :mod:`~bayes_mr.inference.ukf_kernel`),
+      ``reason`` (text), ``fail_step`` (sample, −1 when OK), ``n_jitter``,
+      ``n_clip``, ``max_substeps``, ``n_updates`` (run);
+    * ``history_mean`` (run, hist, param): θ [SI] along the record;
+      ``history_sd_phi``: SD of φ; coordinate ``hist_time`` [s];
+    * ``phi_scale``, ``phi_log``, ``lower``, ``upper`` (param): the
+      coordinates φ = ln(s·θ) (or s·θ) and the plausible ranges [SI].
+
+    Attributes: ``model``, ``kind``, ``source``, ``n_lhs``, ``taus``,
+    ``n_priors``, ``settings`` (JSON), ``fixed`` and ``ranges`` (JSON),
+    ``wall_s``, ``trained`` (OK runs), ``diverged``, ``interrupted``
+    (0/1), ``seed_entropy``, ``seed_spawn_key``, ``record_starts`` (JSON;
+    with ``reset``), ``chunk_size``, ``executor``.
 """
 
 from __future__ import annotations
@@ -41,12 +70,11 @@ import numba
 import numpy as np
 import xarray as xr
 
-from ..inference import ukf
-from ..inference import ukf_kernel as K
-from ..inference.ukf import TAUS, Prior, Problem, UKFSettings
-from ..likelihood import channel_noise
-from ..models import Model, get_model
+from ..likelihood import OutputError, channel_noise
 from ..progress import bar as progress_bar
+from . import ukf
+from . import ukf_kernel as K
+from .ukf import TAUS, Prior, Problem, UKFSettings
 
 #: Channels whose noise SD the filter uses, by kind of test.
 _NOISE_CHANNELS = {
@@ -184,27 +212,25 @@ def settings_from_json(text: str) -> UKFSettings:
 
 
 def train(
-    model: Model | str,
-    record: xr.Dataset,
+    lik: OutputError,
     *,
     n_lhs: int = 10,
     taus: tuple[float, ...] = TAUS,
     settings: UKFSettings = UKFSettings(),
-    ranges: dict[str, tuple[float, float]] | None = None,
-    fixed: dict[str, float] | None = None,
     seed: int | np.random.SeedSequence | None = 0,
     executor=None,
     chunk_size: int | None = None,
     progress: bool = True,
-    reset_records: list[xr.Dataset] | tuple[xr.Dataset, ...] | None = None,
+    reset: np.ndarray | None = None,
 ) -> xr.Dataset:
-    """Train ``model`` on ``record`` from the thesis's LHS × τ priors (§3.6.1).
+    """Train the likelihood's model on its record from the thesis's LHS × τ priors (§3.6.1).
 
     Parameters
     ----------
-    model : Model or str
-    record : xarray.Dataset
-        Training record (package schema).
+    lik : OutputError
+        The binding of (model, record, noise) every engine shares: the
+        filter's channels, valid mask, parameterisation (plausible ranges,
+        fixed parameters) and measurement noise come from it.
     n_lhs : int
         Latin-hypercube samples of the prior means over the plausible ranges.
     taus : sequence of float
@@ -212,9 +238,6 @@ def train(
         coordinate, 3-42); the thesis's ten by default. Runs = n_lhs × len(taus).
     settings : UKFSettings
         Filter settings (sigma points, random walks, box, sub-steps).
-    ranges, fixed : dict, optional
-        Plausible-range overrides name → (lo, hi) and fixed parameters
-        name → value [SI].
     seed : int or SeedSequence or None
         Seed of the Latin hypercube; its entropy is stored in ``attrs``.
     executor : object, optional
@@ -224,49 +247,17 @@ def train(
         Runs per chunk (default: ~10 chunks in process, ~20 with an executor).
     progress : bool
         Progress bar on stderr (only when stderr is a terminal).
-    reset_records : sequence of xarray.Dataset, optional
-        Further records filtered after ``record`` in the same run, the model
-        states restarting from rest at each (thesis method 3).
+    reset : ndarray of bool, shape (N,), optional
+        Samples where the model states restart from rest (several records
+        filtered in one run, thesis method 3: see :func:`concat_records`).
 
     Returns
     -------
     xarray.Dataset
-        Dims ``run`` (prior index; a subset when interrupted), ``param``,
-        ``param_`` (second covariance axis), ``hist`` (history time points).
-
-        * ``lhs``, ``tau`` (run): prior labels;
-        * ``prior_mean`` (run, param): θ of the prior mean [SI];
-          ``prior_sd_phi``: its SD in the log-scaled coordinates φ;
-        * ``final_mean``, ``final_sd`` (run, param): filtered θ and its SD [SI]
-          (delta method: θ·sd_φ for log-scaled parameters, sd_φ/s for signed);
-          ``final_phi`` and ``final_cov_phi`` (run, param, param_): the
-          filter's final Gaussian on φ. For a diverged run these hold the
-          estimate when it stopped (possibly non-finite);
-        * ``log_evidence`` (run): innovation log-likelihood Σ ln N(y_k; ŷ_k⁻, P_yy,k)
-          (NaN for a diverged run, whose sum is partial);
-        * ``status`` (int code of :mod:`~bayes_mr.inference.ukf_kernel`),
-          ``reason`` (text), ``fail_step`` (sample, −1 when OK), ``n_jitter``,
-          ``n_clip``, ``max_substeps``, ``n_updates`` (run);
-        * ``history_mean`` (run, hist, param): θ [SI] along the record;
-          ``history_sd_phi``: SD of φ; coordinate ``hist_time`` [s];
-        * ``phi_scale``, ``phi_log``, ``lower``, ``upper`` (param): the
-          coordinates φ = ln(s·θ) (or s·θ) and the plausible ranges [SI].
-
-        Attributes: ``model``, ``kind``, ``source``, ``n_lhs``, ``taus``,
-        ``n_priors``, ``settings`` (JSON), ``fixed`` and ``ranges`` (JSON),
-        ``wall_s``, ``trained`` (OK runs), ``diverged``, ``interrupted``
-        (0/1), ``seed_entropy``, ``seed_spawn_key``, ``record_starts`` and
-        ``records`` (JSON; several records only), ``chunk_size``, ``executor``.
+        Every run, labelled (the module docstring lists its variables).
     """
     t_start = _time.perf_counter()
-    model = get_model(model)
-    fixed = dict(fixed or {})
-    reset = None
-    records = [record]
-    if reset_records:
-        records += list(reset_records)
-        record, reset = concat_records(records)
-    problem = ukf.make_problem(model, record, settings=settings, ranges=ranges, fixed=fixed)
+    problem = ukf.make_problem(lik, settings=settings)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     priors = ukf.lhs_priors(problem.coords, n_lhs, taus, seed=np.random.default_rng(ss))
     n_runs = len(priors)
@@ -274,10 +265,40 @@ def train(
     if chunk < 1:
         raise ValueError(f"chunk_size must be ≥ 1, got {chunk_size}")
     chunks = [list(range(i, min(i + chunk, n_runs))) for i in range(0, n_runs, chunk)]
+    finished, interrupted = _run_chunks(problem, priors, settings, reset, chunks, executor=executor,
+                                        progress=progress)
+    ds = _assemble(problem, priors, finished, settings)
+    status = ds["status"].values
+    ds.attrs.update(
+        model=lik.model.name,
+        kind=problem.kind,
+        source=str(lik.record.attrs.get("source", "")),
+        n_lhs=int(n_lhs),
+        taus=[float(t) for t in taus],
+        n_priors=int(n_runs),
+        settings=_settings_json(settings),
+        fixed=json.dumps({k: float(v) for k, v in lik.fixed.items()}),
+        ranges=json.dumps({k: [float(v[0]), float(v[1])] for k, v in lik.ranges.items()}),
+        wall_s=float(_time.perf_counter() - t_start),
+        trained=int(np.sum(status == K.OK)),
+        diverged=int(np.sum(status != K.OK)),
+        interrupted=int(interrupted),
+        seed_entropy=str(ss.entropy),
+        seed_spawn_key=json.dumps([int(k) for k in ss.spawn_key]),
+        chunk_size=int(chunk),
+        executor="" if executor is None else type(executor).__name__,
+    )
+    if reset is not None:
+        ds.attrs["record_starts"] = json.dumps([0] + [int(i) for i in np.flatnonzero(reset)])
+    return ds
 
+
+def _run_chunks(problem: Problem, priors: list[Prior], settings: UKFSettings, reset, chunks, *, executor,
+                progress: bool) -> tuple[list, bool]:
+    """Filter every chunk (in process or on ``executor``); returns (finished chunks in order, interrupted)."""
     finished: list[tuple[list[int], dict]] = []
     interrupted = False
-    bar = progress_bar(n_runs, f"UKF training {model.name}", unit="run", enabled=bool(progress))
+    bar = progress_bar(len(priors), f"UKF training {problem.model.name}", unit="run", enabled=bool(progress))
     with bar, _StopOnInterrupt(lambda msg: bar.write(msg, file=sys.stderr)) as stop:
 
         def collect(idx, out):
@@ -298,34 +319,8 @@ def train(
         except KeyboardInterrupt:
             interrupted = True
         interrupted = interrupted or stop.requested
-
     finished.sort(key=lambda item: item[0][0])
-    ds = _assemble(problem, priors, finished, settings)
-    status = ds["status"].values
-    ds.attrs.update(
-        model=model.name,
-        kind=problem.kind,
-        source=str(record.attrs.get("source", "")),
-        n_lhs=int(n_lhs),
-        taus=[float(t) for t in taus],
-        n_priors=int(n_runs),
-        settings=_settings_json(settings),
-        fixed=json.dumps({k: float(v) for k, v in fixed.items()}),
-        ranges=json.dumps({k: [float(v[0]), float(v[1])] for k, v in (ranges or {}).items()}),
-        wall_s=float(_time.perf_counter() - t_start),
-        trained=int(np.sum(status == K.OK)),
-        diverged=int(np.sum(status != K.OK)),
-        interrupted=int(interrupted),
-        seed_entropy=str(ss.entropy),
-        seed_spawn_key=json.dumps([int(k) for k in ss.spawn_key]),
-        chunk_size=int(chunk),
-        executor="" if executor is None else type(executor).__name__,
-    )
-    if reset is not None:
-        starts = [0] + [int(i) for i in np.flatnonzero(reset)]
-        ds.attrs["record_starts"] = json.dumps(starts)
-        ds.attrs["records"] = json.dumps([str(r.attrs.get("source", "")) for r in records])
-    return ds
+    return finished, interrupted
 
 
 def _run_on_executor(executor, problem, priors, settings, reset, chunks, stop, collect) -> bool:

@@ -1,0 +1,193 @@
+"""The three engines, each ``fit(likelihood, *, seed, progress) -> Posterior``.
+
+* :class:`LeastSquares` — output-error least squares with a Laplace
+  posterior (:mod:`.lsq`);
+* :class:`Emcee` — an emcee posterior started at the least-squares optimum,
+  with evidence by thermodynamic integration or Laplace (:mod:`.mcmc`,
+  :mod:`.evidence`);
+* :class:`UKF` — the thesis's augmented-state UKF trained from LHS × τ
+  priors, the run with the lowest validation MSE kept (:mod:`.ukf_training`,
+  :mod:`.ukf_validation`).
+
+All three read the same :class:`~bayes_mr.likelihood.OutputError` and return
+a :class:`~bayes_mr.inference.base.Posterior`; :func:`bayes_mr.results.build`
+turns any of them into the one InferenceData schema. A fourth engine is a
+class here with a ``name`` and a ``fit``, and an entry in :data:`ENGINES`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from ..likelihood import OutputError
+from .base import Posterior, laplace_draws
+from .lsq import LSQSettings, fit_lsq
+from .ukf import TAUS, UKFSettings
+
+
+@dataclass(frozen=True)
+class LeastSquares:
+    """Output-error least squares with Laplace uncertainty (:mod:`bayes_mr.inference.lsq`).
+
+    Attributes
+    ----------
+    settings : LSQSettings
+    n_draws : int
+        Draws of the Laplace posterior stored as the ``posterior`` group.
+    """
+
+    settings: LSQSettings = field(default_factory=LSQSettings)
+    n_draws: int = 1000
+    name: str = "lsq"
+
+    def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
+        """Optimum, Laplace draws (seeded by ``seed``) and Laplace evidence."""
+        lik = likelihood
+        res = fit_lsq(lik, self.settings)
+        coords = lik.par.coords
+        draws_phi = laplace_draws(res.phi, res.cov_phi, lik.phi_lo, lik.phi_hi, self.n_draws,
+                                  np.random.default_rng(seed))
+        x = draws_phi
+        if lik.noise == "sampled":
+            x = np.hstack([draws_phi, np.tile(np.log(res.sigma), (draws_phi.shape[0], 1))])
+        point = coords.to_theta(res.phi)
+        starts = xr.Dataset(
+            {"start_phi": (("start", "param"), np.array([s["phi0"] for s in res.starts])),
+             "final_phi": (("start", "param"), np.array([s["phi"] for s in res.starts])),
+             "cost": ("start", np.array([s["cost"] for s in res.starts])),
+             "nfev": ("start", np.array([s["nfev"] for s in res.starts]))},
+            coords={"param": list(coords.names)})
+        info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
+                "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts)}
+        return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
+                         log_evidence=res.log_evidence, info=info, groups={"lsq_starts": starts},
+                         wall_s=res.wall_s)
+
+
+@dataclass(frozen=True)
+class Emcee:
+    """emcee posterior started at the least-squares optimum (:mod:`bayes_mr.inference.mcmc`).
+
+    Attributes
+    ----------
+    settings : MCMCSettings, optional
+        Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``).
+    evidence : {"ti", "laplace"}
+        ``"ti"``: thermodynamic integration over a temperature ladder, with
+        stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
+        cheap route.
+    """
+
+    settings: object | None = None
+    evidence: str = "ti"
+    name: str = "mcmc"
+
+    def __post_init__(self):
+        if self.evidence not in ("ti", "laplace"):
+            raise ValueError(f"evidence must be 'ti' or 'laplace', got {self.evidence!r}")
+
+    def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
+        """Least squares, then the chain from its optimum, then the evidence routes."""
+        from .evidence import evidence_routes, laplace_evidence
+        from .mcmc import MCMCSettings, fit_mcmc
+        from .mcmc_posterior import mcmc_posterior
+
+        res = fit_lsq(likelihood, LSQSettings(seed=seed))
+        settings = self.settings or MCMCSettings(seed=seed, progress=progress)
+        chain = fit_mcmc(likelihood, lsq=res, settings=settings)
+        if self.evidence == "ti":
+            routes = evidence_routes(likelihood, lsq=res, posterior=chain, seed=seed)
+        else:
+            routes = {"laplace": laplace_evidence(res)}
+        return mcmc_posterior(likelihood, chain, res, evidence=routes)
+
+
+@dataclass(frozen=True)
+class UKF:
+    """The thesis's augmented-state UKF trained from LHS × τ priors (:mod:`bayes_mr.inference.ukf_training`).
+
+    Attributes
+    ----------
+    settings : UKFSettings
+    n_lhs : int
+        Latin-hypercube prior means (× ``taus`` = runs; the thesis's 10 × 10).
+    taus : tuple of float
+        Indices of dispersion (fractions).
+    executor : object, optional
+        Runs training chunks (``concurrent.futures`` or a dask Client).
+    validate_on : xarray.Dataset, optional
+        Choose the run by its MSE on this record (thesis method 2); default
+        the fitted record itself (method 1).
+    n_draws : int
+        Draws from the selected run's final Gaussian.
+    chunk_size : int, optional
+        Runs per training chunk.
+    """
+
+    settings: UKFSettings = field(default_factory=UKFSettings)
+    n_lhs: int = 10
+    taus: tuple[float, ...] = TAUS
+    executor: object | None = None
+    validate_on: xr.Dataset | None = None
+    n_draws: int = 1000
+    chunk_size: int | None = None
+    name: str = "ukf"
+
+    def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
+        """Train from every prior, keep the run with the lowest validation MSE, draw from its Gaussian.
+
+        Seeds the Latin hypercube (``seed`` itself) and the posterior draws
+        (its first spawned child), so both are reproducible and independent.
+
+        Raises
+        ------
+        ValueError
+            No run could be trained and validated (every prior diverged).
+        """
+        from .ukf_training import train
+        from .ukf_validation import best_run, validate_runs
+
+        training = train(likelihood, n_lhs=self.n_lhs, taus=self.taus, settings=self.settings, seed=seed,
+                         executor=self.executor, chunk_size=self.chunk_size, progress=progress)
+        method = 1 if self.validate_on is None else 2
+        validation = validate_runs(training, likelihood.record if method == 1 else self.validate_on)
+        sel = best_run(training, validation)
+        run = training.sel(run=sel)
+        phi, cov = run["final_phi"].values, run["final_cov_phi"].values
+        rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
+        x = draws_phi
+        if likelihood.noise == "sampled":
+            x = np.hstack([draws_phi, np.tile(np.log(likelihood.noise_sd), (self.n_draws, 1))])
+        log_evidence = float(run["log_evidence"])
+        point = run["final_mean"].values
+        info = {
+            "evidence_route": "ukf_innovations", "method": method, "selected_run": int(sel),
+            "selected_lhs": int(run["lhs"]), "selected_tau": float(run["tau"]),
+            "validation_mse": float(validation["mse"].sel(run=sel)),
+            "validated_on": str(validation.attrs.get("source", "")),
+            "interrupted": int(training.attrs["interrupted"]), "training_wall_s": float(training.attrs["wall_s"]),
+        }
+        return Posterior(
+            engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,
+            log_evidence=log_evidence, lp=np.full((1, self.n_draws), log_evidence),
+            simulation={"c_acc": self.settings.c_acc, "n_max": self.settings.n_max}, info=info,
+            groups={"ukf_training": training, "ukf_validation": validation},
+            attrs={"selected_run": int(sel), "method": method},
+            trained=int(training.attrs["trained"]), diverged=int(training.attrs["diverged"]),
+            wall_s=float(training.attrs["wall_s"]),
+        )
+
+
+#: Engine name → estimator class (the ``--engine`` choices).
+ENGINES = {"lsq": LeastSquares, "ukf": UKF, "mcmc": Emcee}
+
+
+def engine(name: str, **options):
+    """The estimator for an engine name (``lsq``, ``ukf``, ``mcmc``), built with ``options``."""
+    if name not in ENGINES:
+        raise ValueError(f"unknown engine '{name}'; valid: {', '.join(ENGINES)}")
+    return ENGINES[name](**options)
