@@ -27,6 +27,7 @@ import numpy as np
 
 from .inference import ukf
 from .inference import ukf_kernel as K
+from .likelihood import OutputError
 from .models import get_model
 from .signals import thesis_signal
 from .simulate import synthesize
@@ -86,7 +87,7 @@ def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 
     rec = _signal_I_record(model, seed)
     m = get_model(model)
     settings = ukf.UKFSettings()
-    problem = ukf.make_problem(m, rec, settings=settings)
+    problem = ukf.make_problem(OutputError(m, rec), settings=settings)
     truth = m.theta("structure", {})
     prior = ukf.Prior(problem.coords.to_phi(truth) + 0.1, np.full(len(problem.coords.names), 0.2))
     ns = len(problem.p0_states)
@@ -169,7 +170,7 @@ def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 
 def training_100(seed: int = 0) -> dict:
     """Wall time of the thesis-size 100-prior training of dahl on signal I."""
     rec = _signal_I_record("dahl", seed)
-    problem = ukf.make_problem("dahl", rec)
+    problem = ukf.make_problem(OutputError("dahl", rec))
     priors = ukf.lhs_priors(problem.coords, seed=seed)
     ukf.run_priors(problem, priors[:2])  # compile outside the timing
     t0 = _time.perf_counter()
@@ -191,7 +192,6 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
     """Wall times of least squares and of an emcee posterior for dahl on a 25 s record."""
     from .inference.lsq import fit_lsq
     from .inference.mcmc import MCMCSettings, fit_mcmc
-    from .likelihood import OutputError
     from .signals import make_signal
 
     sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=20.0, seed=seed)

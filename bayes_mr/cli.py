@@ -146,7 +146,7 @@ def cmd_validate(args) -> int:
     from . import results
     from .identify import validate
 
-    idata = results.load(args.result)
+    idata = results.load_result(args.result)
     rec = _read(args.data, args)
     _write_json(validate(idata, rec), args.json)
     return 0

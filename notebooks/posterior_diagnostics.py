@@ -44,7 +44,9 @@ from bayes_mr.inference import ukf
 from bayes_mr.inference import ukf_kernel as K
 from bayes_mr.inference.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.lsq import fit_lsq
-from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, to_inference_data
+from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc
+from bayes_mr.inference.mcmc_posterior import mcmc_posterior
+from bayes_mr.results import build
 from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
@@ -132,7 +134,7 @@ lsq = fit_lsq(lik)
 settings = MCMCSettings(seed=SEED, progress=False, min_tau_multiple=20.0, rhat_max=1.01, check_every=100)
 post = fit_mcmc(lik, lsq=lsq, settings=settings)
 # pointwise log-likelihood on 40 draws of each walker (960 draws) for LOO / WAIC
-idata = to_inference_data(lik, post, lsq, n_ll_draws=40 * post.n_walkers)
+idata = build(lik, mcmc_posterior(lik, post, lsq, n_ll_draws=40 * post.n_walkers))
 print(f"emcee: {post.n_steps} steps × {post.n_walkers} walkers, burn-in {post.burn}, thin {post.thin}, "
       f"converged={post.converged}, {post.wall_s:.1f} s")
 print("free parameters:", lik.par.names, " sampled noise SDs:", lik.names[lik.n_params:])
@@ -295,7 +297,7 @@ assert np.all(np.abs(z_truth) < 3.0), dict(zip(lik.par.names, z_truth))
 # cross-check doing its job (flagging the UKF), not a failure of the sampler.
 
 # %%
-problem = ukf.make_problem(model, record)
+problem = ukf.make_problem(OutputError(model, record))
 priors = ukf.lhs_priors(problem.coords, n_lhs=4, taus=(0.01, 0.1, 0.5), seed=SEED)
 runs = ukf.run_priors(problem, priors)
 ok = runs["info"][:, K.I_STATUS] == K.OK

@@ -97,7 +97,7 @@ def main(out_dir: str | Path = "results/studies/numerical-selection", quick: boo
                          "thesis E_x ×1e-2": THESIS_ERRORS[model][trial][2]} if model in THESIS_ERRORS else {})})
     params = pd.DataFrame(rows)
     errors = pd.DataFrame(errs)
-    selected, best = validation.select({f"{m}/trial {t}": tr for (m, t), tr in trials.items()})
+    selected, best = validation.best_trial({f"{m}/trial {t}": tr for (m, t), tr in trials.items()})
     # evidence: Laplace at the least-squares optimum of each candidate, on signal II (the thesis's selected trial)
     evid = []
     for model in CANDIDATES:

@@ -29,6 +29,7 @@ from bayes_mr.report import markdown_table
 from bayes_mr.data.ground_motions import load_ground_motion
 from bayes_mr.inference import ukf
 from bayes_mr.inference import ukf_kernel as K
+from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulate import simulate, synthesize
 
@@ -60,7 +61,7 @@ def main(out_dir: str | Path = "results/studies/table-3-2", quick: bool = False,
     n_lhs, taus = (3, (0.01, 0.1, 1.0)) if quick else (10, ukf.TAUS)
     for noise in (0.01, 0.02, 0.05):
         rec = make_record(noise, seed)
-        problem = ukf.make_problem(model, rec)
+        problem = ukf.make_problem(OutputError(model, rec))
         priors = ukf.lhs_priors(problem.coords, n_lhs=n_lhs, taus=taus, seed=seed)
         res = ukf.run_priors(problem, priors)
         ok = res["info"][:, K.I_STATUS] == K.OK

@@ -16,7 +16,7 @@ from bayes_mr.inference.evidence import (
     Evidence,
     laplace_evidence,
     run_ladder,
-    select,
+    select_route,
     stepping_stone,
     thermodynamic_integration,
 )
@@ -101,10 +101,10 @@ def test_select_prefers_ti_then_laplace():
     lap = Evidence("laplace", -10.0, 0.0, float("nan"), float("nan"))
     ti = Evidence("ti", -11.0, 0.1, 0.01, 0.1)
     ss = Evidence("ss", -11.05, 0.1, 0.0, 0.1)
-    assert select({"laplace": lap, "ti": ti, "ss": ss}) is ti
-    assert select({"laplace": lap, "ss": ss}) is lap
+    assert select_route({"laplace": lap, "ti": ti, "ss": ss}) is ti
+    assert select_route({"laplace": lap, "ss": ss}) is lap
     with pytest.raises(ValueError):
-        select({"ss": ss})
+        select_route({"ss": ss})
 
 
 # --- a linear-Gaussian OutputError: every route, Laplace included ------------------------
@@ -251,7 +251,7 @@ def test_ukf_and_mcmc_means_agree_on_the_25_s_record(numerical_study):
     if numerical_study["record"].sizes["time"] < 25000:
         pytest.skip("the UKF agrees with the posterior only on the thesis-length record")
     fit = numerical_study["dahl"]
-    problem = ukf.make_problem("dahl", numerical_study["record"])
+    problem = ukf.make_problem(OutputError("dahl", numerical_study["record"]))
     priors = ukf.lhs_priors(problem.coords, n_lhs=6, taus=(0.01, 0.1, 0.5), seed=0)
     out = ukf.run_priors(problem, priors)
     ok = out["info"][:, K.I_STATUS] == K.OK

@@ -224,7 +224,7 @@ def test_cli_fit_and_validate_report_masked_and_score_only_the_rest(tmp_path):
     assert main(["fit", str(path), "--model", "dahl", "--engine", "lsq", "--json", str(out), "-o", str(res),
                  "--quiet"]) == 0
     assert main(["validate", str(res), str(path2), "--json", str(out2)]) == 0
-    point = results.point_of(results.load(res))
+    point = results.point_of(results.load_result(res))
     for p, clipped, summary in ((path, idx, out), (path2, idx2, out2)):
         got = json.loads(summary.read_text())
         rec = read_record(p)

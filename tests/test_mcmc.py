@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from bayes_mr.inference.crosscheck import ukf_vs_mcmc
+from bayes_mr.inference.mcmc_posterior import mcmc_posterior
 from bayes_mr.stats import integrated_times
 from bayes_mr.inference.mcmc import (
     MCMCSettings,
     fit_mcmc,
     initial_walkers,
     sample,
-    to_inference_data,
 )
 
 
@@ -173,7 +173,7 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     lsq = fit_lsq(lik)
     res = fit_mcmc(lik, lsq=lsq, settings=MCMCSettings(seed=0, progress=False, max_steps=200, check_every=100))
     assert res.chain.shape == (200, 24, 6) and not res.converged
-    idata = to_inference_data(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)})
+    idata = results.build(lik, mcmc_posterior(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)}))
     post = idata.posterior
     assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
     assert post.sizes["chain"] == 24
@@ -189,7 +189,7 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     assert s.params["k"] == pytest.approx(float(post["k"].mean()))
     assert 150 < s.mse < 250  # the maximum-posterior point fits to the noise (≈ 200 = 100 per channel)
     path = results.save(idata, tmp_path / "fit.nc")
-    back = results.load(path)
+    back = results.load_result(path)
     assert results.point_of(back) == pytest.approx(results.point_of(idata))
     np.testing.assert_array_equal(back["mcmc_diagnostics"]["tau"].values, res.tau)
 

@@ -15,13 +15,15 @@ import xarray as xr
 from bayes_mr import results
 from bayes_mr.data.schema import make_record
 from bayes_mr.inference import ukf
+from bayes_mr.likelihood import OutputError
 from bayes_mr.inference import ukf_kernel as K
 from bayes_mr import scores as scores_mod
-from bayes_mr.selection import training as training_mod
-from bayes_mr.selection import (
-    Trial, concat_records, method1, method2, method3, score, select, train, validate_runs,
-)
-from bayes_mr.selection.ukf_fit import ukf_fit
+from bayes_mr.inference import ukf_training as training_mod
+from bayes_mr.identify import UKF, Identify
+from bayes_mr.inference.ukf_training import concat_records, train
+from bayes_mr.inference.ukf_validation import validate_runs
+from bayes_mr.scores import score
+from bayes_mr.selection import Trial, best_trial, method1, method2, method3
 from test_ukf import structure_record
 
 # few priors (3 LHS × 3 τ) on short records keep the file fast; the τ are thesis values
@@ -45,7 +47,7 @@ def dahl_b():
 
 @pytest.fixture(scope="module")
 def trained_a(dahl_a):
-    return train("dahl", dahl_a[0], seed=0, **SMALL)
+    return train(OutputError("dahl", dahl_a[0]), seed=0, **SMALL)
 
 
 # --- the training Dataset ------------------------------------------------------------
@@ -92,16 +94,16 @@ def test_training_returns_every_run_labelled_and_serialisable(trained_a, dahl_a,
 
 def test_same_seed_same_priors_other_seed_other_priors(dahl_a):
     rec = dahl_a[0].isel(time=slice(0, 1500))
-    a = train("dahl", rec, seed=5, n_lhs=2, taus=(0.1,), progress=False)
-    b = train("dahl", rec, seed=5, n_lhs=2, taus=(0.1,), progress=False)
-    c = train("dahl", rec, seed=6, n_lhs=2, taus=(0.1,), progress=False)
+    a = train(OutputError("dahl", rec), seed=5, n_lhs=2, taus=(0.1,), progress=False)
+    b = train(OutputError("dahl", rec), seed=5, n_lhs=2, taus=(0.1,), progress=False)
+    c = train(OutputError("dahl", rec), seed=6, n_lhs=2, taus=(0.1,), progress=False)
     xr.testing.assert_equal(a, b)
     assert not np.allclose(a["prior_mean"].values, c["prior_mean"].values)
 
 
 def test_default_training_is_the_thesis_100_priors(dahl_a):
     """10 Latin-hypercube means × the 10 indices of dispersion of eq. 3-43 (1 s of record)."""
-    ds = train("dahl", dahl_a[0].isel(time=slice(0, 1000)), seed=0, progress=False)
+    ds = train(OutputError("dahl", dahl_a[0].isel(time=slice(0, 1000))), seed=0, progress=False)
     assert ds.sizes["run"] == ds.attrs["n_priors"] == 100 and ds.attrs["n_lhs"] == 10
     assert ds.attrs["taus"] == list(ukf.TAUS) == [0.001, 0.01, 0.1, 0.25, 0.5, 0.75, 1.0, 2.0, 3.0, 6.0]
     assert sorted(set(ds["lhs"].values)) == list(range(10))
@@ -114,7 +116,7 @@ def test_a_diverged_run_is_a_row_with_reason_and_step():
     """σ of the Dahl law up to 1e8 with at most 2 RK4 sub-steps: the stiff priors blow up."""
     rec, _ = structure_record("dahl", {}, n=3000, seed=1)
     settings = ukf.UKFSettings(box_decades=40.0, n_max=2)
-    ds = train("dahl", rec, n_lhs=3, taus=(0.01, 0.1), settings=settings, ranges={"sigma": (1e3, 1e8)},
+    ds = train(OutputError("dahl", rec, ranges={"sigma": (1e3, 1e8)}), n_lhs=3, taus=(0.01, 0.1), settings=settings,
                seed=0, progress=False)
     status = ds["status"].values
     bad = status != K.OK
@@ -138,14 +140,14 @@ def test_a_diverged_run_is_a_row_with_reason_and_step():
 def test_thread_pool_and_dask_give_the_in_process_result_bit_for_bit(trained_a, dahl_a):
     rec = dahl_a[0]
     with cf.ThreadPoolExecutor(max_workers=2) as pool:
-        pooled = train("dahl", rec, seed=0, executor=pool, chunk_size=2, **SMALL)
+        pooled = train(OutputError("dahl", rec), seed=0, executor=pool, chunk_size=2, **SMALL)
     xr.testing.assert_equal(pooled, trained_a)  # values, NaNs and coordinates alike
     assert pooled.attrs["executor"] == "ThreadPoolExecutor" and pooled.attrs["interrupted"] == 0
 
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        dasked = train("dahl", rec, seed=0, executor=client, chunk_size=4, **SMALL)
+        dasked = train(OutputError("dahl", rec), seed=0, executor=client, chunk_size=4, **SMALL)
     xr.testing.assert_equal(dasked, trained_a)
     assert dasked.attrs["executor"] == "Client"
 
@@ -176,7 +178,7 @@ class _CtrlCOnSecondChunk:
 
 
 def test_ctrl_c_while_waiting_on_an_executor_keeps_the_finished_chunks(trained_a, dahl_a):
-    ds = train("dahl", dahl_a[0], seed=0, executor=_CtrlCOnSecondChunk(), chunk_size=2, **SMALL)
+    ds = train(OutputError("dahl", dahl_a[0]), seed=0, executor=_CtrlCOnSecondChunk(), chunk_size=2, **SMALL)
     assert ds.attrs["interrupted"] == 1
     # chunks 0-1, [2-3 lost], 4-5, 6-7, 8 — the ones that finished are kept, unchanged
     assert list(ds["run"].values) == [0, 1, 4, 5, 6, 7, 8]
@@ -197,7 +199,7 @@ def test_ctrl_c_in_process_stops_after_the_running_chunk(trained_a, dahl_a, monk
 
     monkeypatch.setattr(training_mod, "train_chunk", chunk_then_ctrl_c)
     before = signal.getsignal(signal.SIGINT)
-    ds = train("dahl", dahl_a[0], seed=0, chunk_size=2, **SMALL)
+    ds = train(OutputError("dahl", dahl_a[0]), seed=0, chunk_size=2, **SMALL)
     assert signal.getsignal(signal.SIGINT) is before  # the handler is given back
     assert len(calls) == 2 and ds.attrs["interrupted"] == 1
     assert list(ds["run"].values) == [0, 1, 2, 3]
@@ -212,7 +214,7 @@ def test_reset_restarts_the_states_from_rest():
     evidence twice; without the reset the second pass starts from the end of the first and differs."""
     rec, theta = structure_record("dahl", {}, n=2000, seed=2)
     values = dict(zip(("c", "k", "F_d", "sigma"), theta))
-    p1 = ukf.make_problem("dahl", rec, fixed=values)
+    p1 = ukf.make_problem(OutputError("dahl", rec, fixed=values))
     # the same problem (same noise, same state scales) on the record twice over: only the reset differs
     p2 = dataclasses.replace(
         p1, inputs=dataclasses.replace(p1.inputs, rows=np.concatenate([p1.inputs.rows] * 2)),
@@ -236,7 +238,7 @@ def test_reset_zeroes_state_parameter_covariance_and_keeps_phi():
     """A reset on the last sample: the states are back at their prior (mean 0, covariance P0,
     no cross-covariance) and φ is exactly the posterior after the sample before."""
     rec, theta = structure_record("dahl", {}, n=1500, seed=2)
-    problem = ukf.make_problem("dahl", rec)
+    problem = ukf.make_problem(OutputError("dahl", rec))
     shorter = dataclasses.replace(  # the same problem without its last sample
         problem, inputs=problem.inputs.slice(0, 1499), yobs=problem.yobs[:1499], valid=problem.valid[:1499])
     prior = ukf.Prior(problem.coords.to_phi(theta) + 0.05, np.full(4, 0.05))
@@ -314,7 +316,7 @@ def test_method3_trains_on_both_and_validates_on_both(dahl_a, dahl_b):
     assert np.max(np.abs(_rel(trial, theta))) < 0.05
 
     trials = {"dahl/1": method1("dahl", b, seed=0, **SMALL), "dahl/3": trial}
-    name, chosen = select(trials)
+    name, chosen = best_trial(trials)
     assert name == min(trials, key=lambda k: trials[k].scores["mse"]) and chosen is trials[name]
 
 
@@ -339,7 +341,7 @@ def test_method1_on_a_device_test():
 def test_select_refuses_when_nothing_was_validated(trained_a):
     empty = Trial(1, "dahl", trained_a, (), -1, {}, {"mse": float("nan")})
     with pytest.raises(ValueError, match="every UKF run diverged"):
-        select({"dahl/1": empty})
+        best_trial({"dahl/1": empty})
 
 
 # --- scores ---------------------------------------------------------------------------------
@@ -417,9 +419,9 @@ SPEC_FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse"
 
 def test_ukf_fit_round_trips_with_the_spec_summary(dahl_a, dahl_b, tmp_path):
     (a, theta), (b, _) = dahl_a, dahl_b
-    idata = ukf_fit("dahl", a, validate_on=b, seed=0, n_draws=300, **SMALL)
+    idata = Identify("dahl", UKF(validate_on=b, n_draws=300, n_lhs=3, taus=(0.01, 0.1, 0.5))).fit(a, seed=0, progress=False)
     path = results.save(idata, tmp_path / "fit.nc")
-    back = results.load(path)
+    back = results.load_result(path)
     summary = results.summary_of(back).to_dict()
     assert SPEC_FIT_KEYS <= set(summary)
     assert summary["engine"] == "ukf" and summary["model"] == "dahl" and summary["method"] == 2

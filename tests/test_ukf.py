@@ -8,6 +8,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from bayes_mr.data.schema import make_record
 from bayes_mr.inference import ukf
+from bayes_mr.likelihood import OutputError
 from bayes_mr.inference import ukf_kernel as K
 from bayes_mr.inference.sigma import MerweScaled
 from bayes_mr.models import get_model
@@ -65,7 +66,7 @@ def test_ukf_equals_exact_kalman_filter_on_linear_model():
     values = dict(c=c, k=k, beta=beta, epsilon=eps, alpha=1e-300)
     rec, _ = structure_record("lugre", values, n=3000)
     model = get_model("lugre")
-    problem = ukf.make_problem(model, rec, fixed=values)
+    problem = ukf.make_problem(OutputError(model, rec, fixed=values))
     assert problem.coords.names == ()
     prior = ukf.Prior(np.zeros(0), np.zeros(0))
     out = ukf.filter_states(problem, prior)
@@ -113,7 +114,7 @@ def test_ukf_agrees_with_filterpy_step_by_step(central, tol):
     rec, theta = structure_record("dahl", {}, n=800)
     model = get_model("dahl")
     settings = ukf.UKFSettings(points=MerweScaled(alpha=0.3, beta=2.0, kappa=0.0, central=central), box_decades=50.0)
-    problem = ukf.make_problem(model, rec, settings=settings)
+    problem = ukf.make_problem(OutputError(model, rec), settings=settings)
     truth_phi = problem.coords.to_phi(theta)
     prior = ukf.Prior(truth_phi + 0.05, np.full(4, 0.05))
     ours = ukf.filter_states(problem, prior, settings)
@@ -165,7 +166,7 @@ def test_ukf_recovers_parameters_from_simulated_structure_test(name, values, che
     rec, theta = structure_record(name, values, n=10000, seed=3, rms=0.6)
     model = get_model(name)
     settings = ukf.UKFSettings()
-    problem = ukf.make_problem(model, rec, settings=settings)
+    problem = ukf.make_problem(OutputError(model, rec), settings=settings)
     priors = ukf.lhs_priors(problem.coords, n_lhs=6, taus=(0.01, 0.1, 0.5), seed=0)
     out = ukf.run_priors(problem, priors, settings)
     ok = out["info"][:, K.I_STATUS] == K.OK
@@ -193,7 +194,7 @@ def test_ukf_recovers_classic_bouc_wen_of_thesis_table_3_2():
         t, dict(ground_acceleration=ag, displacement=x + sd_x * rng.standard_normal(x.size),
                 acceleration=a + sd_a * rng.standard_normal(x.size)), mass=0.2,
         attrs=dict(noise_sd_displacement=sd_x, noise_sd_acceleration=sd_a, noise_sd_ground_acceleration=sd_ag))
-    problem = ukf.make_problem(model, rec)
+    problem = ukf.make_problem(OutputError(model, rec))
     out = ukf.run_priors(problem, ukf.lhs_priors(problem.coords, seed=0))
     ok = out["info"][:, K.I_STATUS] == K.OK
     # γ > β₁ makes Bouc–Wen blow up in finite time: priors that wander there diverge (recorded)
@@ -206,7 +207,7 @@ def test_ukf_recovers_classic_bouc_wen_of_thesis_table_3_2():
 def test_forced_divergence_is_recorded_and_other_runs_finish():
     rec, theta = structure_record("dahl", {}, n=2000)
     settings = ukf.UKFSettings(box_decades=40.0, n_max=2)
-    problem = ukf.make_problem("dahl", rec, settings=settings)
+    problem = ukf.make_problem(OutputError("dahl", rec), settings=settings)
     good = ukf.Prior(problem.coords.to_phi(theta), np.full(4, 0.1))
     wild = problem.coords.to_phi(theta)
     wild[3] += 25.0  # σ of the Dahl law e^25 times too stiff: the integration blows up
@@ -221,4 +222,4 @@ def test_forced_divergence_is_recorded_and_other_runs_finish():
 def test_sensor_delay_is_refused_with_a_clear_reason():
     rec, _ = structure_record("dahl", {}, n=500)
     with pytest.raises(ValueError, match="sensor_delay"):
-        ukf.make_problem("dahl+sensor_delay", rec)
+        ukf.make_problem(OutputError("dahl+sensor_delay", rec))
