@@ -74,7 +74,7 @@ class Form:
     frame_in_form: bool = True
     fixed: tuple[str, ...] = ()
 
-    def __add__(self, effect: Effect) -> "Model":
+    def __add__(self, effect: Effect) -> Model:
         return Model(self) + effect
 
 

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 # Exponents (force, displacement, velocity, duration) of the record scale a
 # plausible range is relative to (ParamSpec.dims), named by the unit they give.
 F_V = (1, 0, -1, 0)  # N·s/m

@@ -8,9 +8,9 @@ calls the generator of :mod:`~bayes_mr.signals.thesis` or
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable
 
 import numpy as np
 
