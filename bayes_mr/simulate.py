@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .models import Model, get_model, kernel
+from .models import Model, get_model
+from .models.drivers import run_batch
 
 #: Output channels of a simulation, by kind of test.
 OUTPUT_NAMES = {
@@ -178,10 +179,10 @@ def simulate(
     failed = np.empty(B, dtype=np.int64)
     if schedule is None:
         schedules = np.zeros((B, max(N - 1, 1)), dtype=np.int64)
-        kernel.run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, False, failed)
+        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, False, failed)
     else:
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
-        kernel.run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, True, failed)
+        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, True, failed)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}
     channel = model.delay_channel(kind)
     if channel is not None:
@@ -249,16 +250,28 @@ def synthesize(
         ``force`` (damper force) channel.
     """
     from .data.schema import make_record
-    from .noise import band_limited_noise
 
     model = get_model(model)
     kind = "structure" if "ground_acceleration" in inputs else "device"
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    rng = np.random.default_rng(seq)
     time = np.asarray(time, float)
     dt = float(time[1] - time[0])
-    fs = 1.0 / dt
-    volt = inputs.get("voltage")
+    noisy = _noise_adder(noise, 1.0 / dt, np.random.default_rng(seq), band)
+    attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
+             "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
+    channels, sds, sim = _measure(model, theta, kind, inputs, dt, mass, noisy)
+    attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
+    if inputs.get("voltage") is not None:
+        channels["voltage"] = np.asarray(inputs["voltage"], float)
+    if not sim.ok.all():
+        raise ValueError(f"the simulation of {model.name} diverged at sample {int(sim.failed[0])}: "
+                         "check the parameters (a stiffer law may need a higher sampling rate)")
+    return make_record(time, channels, kind=kind, mass=mass, source=source, attrs=attrs)
+
+
+def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float | None):
+    """``x ↦ (x + noise, its SD)``: band-limited noise of SD ``noise`` × RMS(x); none when ``noise`` ≤ 0."""
+    from .noise import band_limited_noise
 
     def noisy(x):
         if noise <= 0:
@@ -266,28 +279,32 @@ def synthesize(
         sd = noise * float(np.sqrt(np.mean(np.square(x))))
         return x + band_limited_noise(x.size, fs, sd, rng, band), sd
 
-    attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
-             "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
+    return noisy
+
+
+def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy):
+    """Simulate and 'measure' a test: the recorded channels, their noise SDs and the simulation.
+
+    The noise is drawn in a fixed order (structure: input, displacement,
+    acceleration; device: displacement, velocity, force) so a seed gives the
+    same record.
+    """
+    volt = inputs.get("voltage")
+    sds = {}
     if kind == "structure":
         ag = np.asarray(inputs["ground_acceleration"], float)
-        felt, sd_ag = noisy(ag)
+        felt, sd_ag = noisy(ag)  # the frame feels ẍ_g + w; the record keeps ẍ_g
         sim = simulate(model, Inputs.structure(felt, dt, mass, volt), theta)
         channels = {"ground_acceleration": ag}
         for name in ("displacement", "acceleration"):
-            channels[name], attrs[f"noise_sd_{name}"] = noisy(sim[name])
+            channels[name], sds[name] = noisy(sim[name])
         channels["force"] = sim["force"]
-        attrs["noise_sd_ground_acceleration"] = sd_ag
+        sds["ground_acceleration"] = sd_ag
     else:
         x = np.asarray(inputs["displacement"], float)
         v = np.asarray(inputs["velocity"], float)
         sim = simulate(model, Inputs.device(x, v, dt, volt), theta)
         channels = {}
-        channels["displacement"], attrs["noise_sd_displacement"] = noisy(x)
-        channels["velocity"], attrs["noise_sd_velocity"] = noisy(v)
-        channels["force"], attrs["noise_sd_force"] = noisy(sim["force"])
-    if volt is not None:
-        channels["voltage"] = np.asarray(volt, float)
-    if not sim.ok.all():
-        raise ValueError(f"the simulation of {model.name} diverged at sample {int(sim.failed[0])}: "
-                         "check the parameters (a stiffer law may need a higher sampling rate)")
-    return make_record(time, channels, kind=kind, mass=mass, source=source, attrs=attrs)
+        for name, value in (("displacement", x), ("velocity", v), ("force", sim["force"])):
+            channels[name], sds[name] = noisy(value)
+    return channels, sds, sim

@@ -1,5 +1,6 @@
-"""Model forms, effects and their composition (see ``../shared/SPEC.md``, Models/Effects)."""
+"""Model forms, effects and their composition (see ``docs/CONTRACT.md``, Models/Effects)."""
 
+from .catalog import get_model
 from .effects import (
     ASYMMETRY,
     CUBIC_STIFFNESS,
@@ -13,8 +14,8 @@ from .effects import (
     VOLTAGE_DEPENDENCE,
     Effect,
 )
-from .forms import BOUC_WEN, DAHL, FORMS, LUGRE, NORMALIZED_BOUC_WEN, SPENCER, Form
-from .model import KINDS, Model, get_model
+from .forms import BOUC_WEN, DAHL, FORMS, LUGRE, NORMALIZED_BOUC_WEN, SPENCER
+from .model import KINDS, Form, Model
 from .params import Coordinates, ParamSpec, Scales
 
 __all__ = [

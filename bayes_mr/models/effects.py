@@ -1,4 +1,4 @@
-"""The eight effects of the SPEC, each an extension that composes with any form.
+"""The eight effects of ``docs/CONTRACT.md``, each an extension that composes with any form.
 
 An effect is what a model can miss in a measured record; switched on, it adds
 parameters (and sometimes a state) to the model. The kernel applies them as:
@@ -34,7 +34,7 @@ class Effect:
     Attributes
     ----------
     name : str
-        SPEC name.
+        Contract name (``docs/CONTRACT.md``).
     description : str
         What happens in the device or frame.
     params : tuple of ParamSpec
@@ -73,14 +73,17 @@ class Effect:
         raise TypeError("add effects to a form or model: Dahl() + ForceOffset(), not effect + effect")
 
 
+def _zero_centred(symbol: str, unit: str, meaning: str, dims: tuple[int, int, int, int], bound: float) -> ParamSpec:
+    """A signed parameter, default 0 (effect off), plausible within ±bound × the record scale of ``dims``."""
+    return ParamSpec(symbol, unit, meaning, 0.0, dims, (0.0, bound), positive=False)
+
+
 FORCE_OFFSET = Effect(
-    "force_offset",
-    "a constant force f0 added to f_r (accumulator preload, load-cell bias)",
-    (ParamSpec("f0", "N", "constant force offset", 0.0, (1, 0, 0, 0), (0.0, 1.0), positive=False),),
+    "force_offset", "a constant force f0 added to f_r (accumulator preload, load-cell bias)",
+    (_zero_centred("f0", "N", "constant force offset", (1, 0, 0, 0), 1.0),),
 )
 VOLTAGE_DEPENDENCE = Effect(
-    "voltage_dependence",
-    "damper strength depends on the command voltage through a first-order lag",
+    "voltage_dependence", "damper strength depends on the command voltage through a first-order lag",
     (
         ParamSpec("a_v", "1/V", "hysteretic strength gain per volt of filtered voltage", 1.0, (0, 0, 0, 0), (1e-3, 100.0)),
         ParamSpec("c_v", "N·s/(m·V)", "viscous damping per volt of filtered voltage", 300.0, (1, 0, -1, 0), (1e-5, 10.0)),
@@ -90,18 +93,15 @@ VOLTAGE_DEPENDENCE = Effect(
     needs_voltage=True,
 )
 STIFFNESS_DRIFT = Effect(
-    "stiffness_drift",
-    "a stiffness or strength that drifts with time over the record (heating)",
-    (ParamSpec("drift", "1/s", "relative change of stiffness and strength per second", 0.0, (0, 0, 0, -1), (0.0, 0.5), positive=False),),
+    "stiffness_drift", "a stiffness or strength that drifts with time over the record (heating)",
+    (_zero_centred("drift", "1/s", "relative change of stiffness and strength per second", (0, 0, 0, -1), 0.5),),
 )
 ASYMMETRY = Effect(
-    "asymmetry",
-    "different yield force in tension and compression (misaligned paddle)",
-    (ParamSpec("asym", "-", "relative yield-force difference: (1 ± asym)·F", 0.0, (0, 0, 0, 0), (0.0, 0.9), positive=False),),
+    "asymmetry", "different yield force in tension and compression (misaligned paddle)",
+    (_zero_centred("asym", "-", "relative yield-force difference: (1 ± asym)·F", (0, 0, 0, 0), 0.9),),
 )
 SMALL_AMPLITUDE_REGIME = Effect(
-    "small_amplitude_regime",
-    "a different hysteresis below a displacement threshold (thesis §5.2: under 2 mm)",
+    "small_amplitude_regime", "a different hysteresis below a displacement threshold (thesis §5.2: under 2 mm)",
     (
         ParamSpec("r_s", "-", "hysteretic strength below the threshold relative to above", 0.5, (0, 0, 0, 0), (0.02, 50.0)),
         ParamSpec("x_s", "m", "displacement-amplitude threshold", 0.002, (0, 1, 0, 0), (0.05, 1.0)),
@@ -110,19 +110,16 @@ SMALL_AMPLITUDE_REGIME = Effect(
     options={"t_env": 1.0},
 )
 LOW_VELOCITY_ROLLOFF = Effect(
-    "low_velocity_rolloff",
-    "force rolls off at low velocity (series dashpot, as in spencer)",
+    "low_velocity_rolloff", "force rolls off at low velocity (series dashpot, as in spencer)",
     (ParamSpec("c_s", "N·s/m", "series dashpot", 1.0e4, (1, 0, -1, 0), (0.1, 1000.0)),),
 )
 SENSOR_DELAY = Effect(
-    "sensor_delay",
-    "one measured channel lags the others by a few samples",
+    "sensor_delay", "one measured channel lags the others by a few samples",
     (ParamSpec("delay", "s", "lag of the delayed channel", 1e-3, (0, 0, 0, 0), (1e-5, 0.05)),),
     options={"channel": None},
 )
 CUBIC_STIFFNESS = Effect(
-    "cubic_stiffness",
-    "a hardening frame, k3·x³",
+    "cubic_stiffness", "a hardening frame, k3·x³",
     (ParamSpec("k3", "N/m³", "cubic stiffness", 1e8, (1, -3, 0, 0), (1e-3, 10.0)),),
 )
 

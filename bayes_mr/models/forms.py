@@ -1,4 +1,4 @@
-"""The five model forms of the SPEC: parameter specs and state names.
+"""The five model forms of ``docs/CONTRACT.md``: parameter specs and state names.
 
 The right-hand sides live in :mod:`bayes_mr.models.kernel` (one compiled
 kernel for all forms); each form here names its kernel code. Defaults are the
@@ -17,105 +17,42 @@ an unloading branch can push z outward and the filter diverges.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from . import kernel
-from .params import ParamSpec
-
-F_V = (1, 0, -1, 0)  # N·s/m
-F_X = (1, -1, 0, 0)  # N/m
-F_ = (1, 0, 0, 0)  # N
-PER_X = (0, -1, 0, 0)  # 1/m
-PER_X2 = (0, -2, 0, 0)  # 1/m²
-ONE = (0, 0, 0, 0)
+from .model import Form
+from .params import F_, F_V, F_X, ONE, PER_X, PER_X2, ParamSpec
 
 C = ParamSpec("c", "N·s/m", "viscous damping (frame + damper)", 100.0, F_V, (1e-3, 2.0))
 K = ParamSpec("k", "N/m", "stiffness (frame + damper)", 2.0e4, F_X, (1e-4, 3.0))
 
 
-@dataclass(frozen=True)
-class Form:
-    """A model form: the damper law without effects.
-
-    Attributes
-    ----------
-    name : str
-        SPEC name (``dahl``, ``lugre``, ...).
-    code : int
-        Kernel form code.
-    title : str
-        Human name with the thesis equations.
-    params : tuple of ParamSpec
-        Parameters in kernel order.
-    states : tuple of str
-        Hysteretic state names in kernel order.
-    frame_in_form : bool
-        True when the form's own ``c``, ``k`` also carry the frame (all but
-        ``spencer``, whose structure tests get a separate frame ``c``, ``k``).
-    fixed : tuple of str
-        Redundant parameters held at their value during estimation.
-    """
-
-    name: str
-    code: int
-    title: str
-    params: tuple[ParamSpec, ...]
-    states: tuple[str, ...]
-    frame_in_form: bool = True
-    fixed: tuple[str, ...] = ()
-
-    def __add__(self, effect):
-        from .model import Model
-
-        return Model(self) + effect
+def _with_c_k(name: str, code: int, title: str, *hysteretic: ParamSpec) -> Form:
+    """A thesis form (3-52..3-70): shared c, k (:data:`C`, :data:`K`), its hysteretic parameters, one state z."""
+    return Form(name, code, title, (C, K, *hysteretic), ("z",))
 
 
-NORMALIZED_BOUC_WEN = Form(
-    "normalized-bouc-wen",
-    kernel.NBW,
-    "normalized Bouc–Wen (thesis 3-52..3-58)",
-    (
-        C,
-        K,
-        ParamSpec("k_z", "N", "hysteretic force amplitude", 24.51, F_, (1e-3, 1.0)),
-        ParamSpec("rho", "1/m", "initial slope of z", 2508.0, PER_X, (0.3, 1000.0)),
-        ParamSpec("n", "-", "smoothness of the transition", 1.06, ONE, (1.0, 4.0)),
-        ParamSpec("sigma", "-", "loop shape (σ ≥ 1/2 keeps |z| ≤ 1)", 1.03, ONE, (0.5, 5.0)),
-    ),
-    ("z",),
+NORMALIZED_BOUC_WEN = _with_c_k(
+    "normalized-bouc-wen", kernel.NBW, "normalized Bouc–Wen (thesis 3-52..3-58)",
+    ParamSpec("k_z", "N", "hysteretic force amplitude", 24.51, F_, (1e-3, 1.0)),
+    ParamSpec("rho", "1/m", "initial slope of z", 2508.0, PER_X, (0.3, 1000.0)),
+    ParamSpec("n", "-", "smoothness of the transition", 1.06, ONE, (1.0, 4.0)),
+    ParamSpec("sigma", "-", "loop shape (σ ≥ 1/2 keeps |z| ≤ 1)", 1.03, ONE, (0.5, 5.0)),
 )
 
-DAHL = Form(
-    "dahl",
-    kernel.DAHL,
-    "modified Dahl (thesis 3-59..3-64)",
-    (
-        C,
-        K,
-        ParamSpec("F_d", "N", "Coulomb (Dahl) friction force", 25.0, F_, (1e-3, 1.0)),
-        ParamSpec("sigma", "1/m", "Dahl loop shape (pre-sliding stiffness / F_d)", 2500.0, PER_X, (0.3, 1000.0)),
-    ),
-    ("z",),
+DAHL = _with_c_k(
+    "dahl", kernel.DAHL, "modified Dahl (thesis 3-59..3-64)",
+    ParamSpec("F_d", "N", "Coulomb (Dahl) friction force", 25.0, F_, (1e-3, 1.0)),
+    ParamSpec("sigma", "1/m", "Dahl loop shape (pre-sliding stiffness / F_d)", 2500.0, PER_X, (0.3, 1000.0)),
 )
 
-LUGRE = Form(
-    "lugre",
-    kernel.LUGRE,
-    "modified LuGre (thesis 3-65..3-70)",
-    (
-        C,
-        K,
-        ParamSpec("beta", "N/m", "generalised stiffness of z", 6.1484e4, F_X, (1e-2, 1000.0)),
-        ParamSpec("epsilon", "N·s/m", "generalised damping of z", 38.39, F_V, (1e-4, 1.0)),
-        ParamSpec("alpha", "1/m", "generalised stiffness parameter of ż", 2442.0, PER_X, (0.3, 1000.0)),
-    ),
-    ("z",),
+LUGRE = _with_c_k(
+    "lugre", kernel.LUGRE, "modified LuGre (thesis 3-65..3-70)",
+    ParamSpec("beta", "N/m", "generalised stiffness of z", 6.1484e4, F_X, (1e-2, 1000.0)),
+    ParamSpec("epsilon", "N·s/m", "generalised damping of z", 38.39, F_V, (1e-4, 1.0)),
+    ParamSpec("alpha", "1/m", "generalised stiffness parameter of ż", 2442.0, PER_X, (0.3, 1000.0)),
 )
 
 BOUC_WEN = Form(
-    "bouc-wen",
-    kernel.BW,
-    "classic Bouc–Wen (thesis 3-31, 3-32)",
+    "bouc-wen", kernel.BW, "classic Bouc–Wen (thesis 3-31, 3-32)",
     (
         ParamSpec("c", "N·s/m", "viscous damping", 0.3, F_V, (1e-3, 2.0)),
         ParamSpec("k", "N/m", "stiffness (elastic and hysteretic)", 9.0, F_X, (1e-4, 3.0)),
@@ -128,10 +65,8 @@ BOUC_WEN = Form(
 
 # Spencer et al. (1997) prototype damper, published in cm units; converted to SI.
 SPENCER = Form(
-    "spencer",
-    kernel.SPENCER,
-    "Spencer et al. (1997) phenomenological model",
-    (
+    "spencer", kernel.SPENCER, "Spencer et al. (1997) phenomenological model",
+    params=(
         ParamSpec("alpha_a", "N/m", "Bouc–Wen stiffness α at 0 V", 1.40e4, F_X, (1e-3, 10.0)),
         ParamSpec("alpha_b", "N/(m·V)", "α per volt", 6.95e4, F_X, (1e-3, 10.0)),
         ParamSpec("c0a", "N·s/m", "high-velocity damping c0 at 0 V", 2.10e3, F_V, (1e-3, 10.0)),
@@ -147,14 +82,9 @@ SPENCER = Form(
         ParamSpec("n", "-", "Bouc–Wen exponent", 2.0, ONE, (1.0, 4.0)),
         ParamSpec("eta", "1/s", "current-driver lag 1/time constant", 190.0, (0, -1, 1, 0), (0.01, 100.0)),
     ),
-    ("y", "z", "u"),
+    states=("y", "z", "u"),
     frame_in_form=False,
     fixed=("A",),
 )
 
 FORMS: dict[str, Form] = {f.name: f for f in (NORMALIZED_BOUC_WEN, DAHL, LUGRE, BOUC_WEN, SPENCER)}
-#: Frame parameters added to ``spencer`` in structure tests.
-FRAME = (
-    ParamSpec("c", "N·s/m", "frame viscous damping", 100.0, F_V, (1e-4, 2.0)),
-    ParamSpec("k", "N/m", "frame stiffness", 2.5e4, F_X, (1e-3, 3.0)),
-)

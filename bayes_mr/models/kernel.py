@@ -15,7 +15,7 @@ Input row ``a`` (3,): structure ``[ẍ_g, 0, v]``; device ``[x, ẋ, v]``,
 linear in time between samples. ``p`` holds natural (SI) parameters.
 Time ``t`` is measured from the first sample.
 
-Equations are those of ``../shared/SPEC.md`` (thesis 3-31/32, 3-52..3-70,
+Equations are those of ``docs/CONTRACT.md`` (thesis 3-31/32, 3-52..3-70,
 Spencer et al. 1997) with ``|z|^{n-1} z`` written ``sgn(z)|z|^n``.
 """
 
@@ -23,10 +23,7 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-from numba import prange
-
-from .._jit import driver, hot
+from .._jit import hot
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
@@ -88,6 +85,20 @@ def _zdot(form, w, z, q1, q2, q3):
     return w - q1 * abs(w) * _sgn(z) * rn - q2 * w * rn
 
 
+@hot(inline="always")
+def _spencer(p, o, us, m_s):
+    """Spencer's coefficients at filtered voltage ``us`` (parameters from ``p[o]``).
+
+    Returns α (× strength multiplier ``m_s``), c0, c1, k0 and the Bouc–Wen
+    γ, β, A, n and the current-driver rate η, in that order; shared by
+    :func:`deriv` and :func:`rate` so both read the same parameter layout.
+    """
+    alpha = (p[o] + p[o + 1] * us) * m_s
+    c0 = p[o + 2] + p[o + 3] * us
+    c1 = p[o + 5] + p[o + 6] * us
+    return alpha, c0, c1, p[o + 4], p[o + 9], p[o + 10], p[o + 11], p[o + 12], p[o + 13]
+
+
 @hot
 def deriv(lay, cst, p, t, a, s, ds):
     """Evaluate ṡ = f(s, a(t); p) into ``ds``.
@@ -145,27 +156,13 @@ def deriv(lay, cst, p, t, a, s, ds):
         asym = p[lay[L_ASYM]]
 
     if form == SPENCER:
-        aa = p[o]
-        ab = p[o + 1]
-        c0a = p[o + 2]
-        c0b = p[o + 3]
-        k0 = p[o + 4]
-        c1a = p[o + 5]
-        c1b = p[o + 6]
         k1 = p[o + 7]
         x0 = p[o + 8]
-        gam = p[o + 9]
-        bet = p[o + 10]
-        A = p[o + 11]
-        n = p[o + 12]
-        eta = p[o + 13]
         y = s[i]
         z = s[i + 1]
         us = s[i + 2]
+        alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, us, m_s)
         ds[i + 2] = eta * (v - us)
-        alpha = (aa + ab * us) * m_s
-        c0 = c0a + c0b * us
-        c1 = c1a + c1b * us
         yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
         r = xd - yd
         zn = math.pow(abs(z), n)
@@ -237,22 +234,7 @@ def rate(lay, cst, p, t, s, vmax):
     lam = 0.0
     coupling = 0.0
     if form == SPENCER:
-        aa = p[o]
-        ab = p[o + 1]
-        c0a = p[o + 2]
-        c0b = p[o + 3]
-        k0 = p[o + 4]
-        c1a = p[o + 5]
-        c1b = p[o + 6]
-        gam = p[o + 9]
-        bet = p[o + 10]
-        A = p[o + 11]
-        n = p[o + 12]
-        eta = p[o + 13]
-        us = abs(s[i + 2])
-        alpha = (aa + ab * us) * m_s
-        c0 = c0a + c0b * us
-        c1 = c1a + c1b * us
+        alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, abs(s[i + 2]), m_s)
         z = abs(s[i + 1])
         zsat = math.pow(A / (gam + bet), 1.0 / n)
         zf = max(z, 0.1 * zsat) if n < 1.0 else max(z, zsat)
@@ -372,89 +354,3 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
             xa = abs(s[0]) if lay[L_KIND] == STRUCT else abs(am[0])
             decayed = s[ie] * math.exp(-hs / cst[K_TENV])
             s[ie] = xa if xa > decayed else decayed
-
-
-@hot(inline="always")
-def _vmax(lay, cst, s, k1, a0, a1, h):
-    if lay[L_KIND] == STRUCT:
-        return abs(s[1]) + abs(k1[1]) * h
-    return max(abs(a0[1]), abs(a1[1]))
-
-
-@hot(inline="always")
-def _write_out(lay, cst, s, f_r, f_d, out):
-    if lay[L_KIND] == STRUCT:
-        out[0] = s[0]
-        out[1] = s[1]
-        out[2] = -f_r / cst[K_MASS]
-        out[3] = f_d
-    else:
-        out[0] = f_r
-        out[1] = f_d
-
-
-@hot
-def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work):
-    ns = lay[L_NS]
-    N = inputs.shape[0]
-    for q in range(ns):
-        s[q] = 0.0
-    for k in range(N):
-        t = k * h
-        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
-        _write_out(lay, cst, s, f_r, f_d, out[k])
-        if not math.isfinite(f_r):
-            for kk in range(k, N):
-                for j in range(out.shape[1]):
-                    out[kk, j] = np.nan
-            return k
-        if k == N - 1:
-            break
-        if use_schedule:
-            n_sub = schedule[k]
-        else:
-            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
-            n_sub = substeps(lay, cst, lam, h)
-            schedule[k] = n_sub
-        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
-    return -1
-
-
-@driver
-def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
-    """Simulate one parameter set from rest over all samples.
-
-    Parameters
-    ----------
-    out : ndarray, shape (N, n_out)
-        Structure: displacement, velocity, absolute acceleration, damper force.
-        Device: force (total), damper force.
-    schedule : int64 ndarray, shape (N-1,)
-        Sub-steps per interval: written when ``use_schedule`` is False, read
-        when True (so perturbed parameter sets integrate on the same grid).
-
-    Returns
-    -------
-    failed_at : int
-        Sample index where the state became non-finite, or -1.
-    """
-    ns = lay[L_NS]
-    s = np.zeros(ns)
-    k1 = np.zeros(ns)
-    work = np.zeros((5, max(ns, 3)))
-    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
-
-
-@driver(parallel=True)
-def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed):
-    """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
-
-    ``out`` has shape (B, N, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
-    When ``use_schedule`` is True every member uses ``schedules[0]``.
-    """
-    B = P.shape[0]
-    for b in prange(B):
-        if use_schedule:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True)
-        else:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False)

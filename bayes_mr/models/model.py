@@ -1,5 +1,12 @@
 """A model = one form + any effects, bound to a kind of test when used.
 
+:class:`Form` (a damper law) and :class:`Model` (a form with effects) live
+together here because ``Form + Effect`` builds a ``Model``; the five forms
+themselves are in :mod:`bayes_mr.models.forms`, the eight effects in
+:mod:`bayes_mr.models.effects`, and :func:`bayes_mr.models.catalog.get_model`
+parses a model name. Nothing here imports those catalogues, so the layers
+stay acyclic: params, kernel → effects → model → forms → catalog.
+
 >>> from bayes_mr.models import DAHL, FORCE_OFFSET, get_model
 >>> (DAHL + FORCE_OFFSET).name
 'dahl+force_offset'
@@ -14,11 +21,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernel
-from .effects import EFFECTS, NONE, Effect
-from .forms import FORMS, FRAME, Form
-from .params import Coordinates, ParamSpec, Scales
+from .effects import Effect
+from .params import F_V, F_X, Coordinates, ParamSpec, Scales
 
+#: The kinds of test a model is bound to: a storey on a shake table, or the damper alone.
 KINDS = ("structure", "device")
+
+#: Frame parameters a structure test adds to a form without its own ``c``, ``k`` (``spencer``).
+FRAME = (
+    ParamSpec("c", "N·s/m", "frame viscous damping", 100.0, F_V, (1e-4, 2.0)),
+    ParamSpec("k", "N/m", "frame stiffness", 2.5e4, F_X, (1e-3, 3.0)),
+)
 
 # Effects a form already contains.
 _BUILT_IN = {"spencer": ("voltage_dependence", "low_velocity_rolloff")}
@@ -28,6 +41,42 @@ def _check_kind(kind: str) -> int:
     if kind not in KINDS:
         raise ValueError(f"unknown kind of test '{kind}'; valid: {', '.join(KINDS)}")
     return kernel.STRUCT if kind == "structure" else kernel.DEVICE
+
+
+@dataclass(frozen=True)
+class Form:
+    """A model form: the damper law without effects.
+
+    Attributes
+    ----------
+    name : str
+        Contract name (``dahl``, ``lugre``, ...).
+    code : int
+        Kernel form code.
+    title : str
+        Human name with the thesis equations.
+    params : tuple of ParamSpec
+        Parameters in kernel order.
+    states : tuple of str
+        Hysteretic state names in kernel order.
+    frame_in_form : bool
+        True when the form's own ``c``, ``k`` also carry the frame (all but
+        ``spencer``, whose structure tests get a separate frame ``c``, ``k``).
+    fixed : tuple of str
+        Redundant parameters held at their value during estimation.
+    """
+
+    name: str
+    code: int
+    title: str
+    params: tuple[ParamSpec, ...]
+    states: tuple[str, ...]
+    frame_in_form: bool = True
+    fixed: tuple[str, ...] = ()
+
+    def __add__(self, effect: Effect) -> Model:
+        return Model(self) + effect
+
 
 
 @dataclass(frozen=True)
@@ -232,24 +281,3 @@ class Model:
             return None
         return e.options.get("channel") or ("acceleration" if kind == "structure" else "force")
 
-
-def get_model(name: str) -> Model:
-    """Parse ``FORM[+EFFECT...]`` (e.g. ``"spencer+force_offset+sensor_delay"``).
-
-    ``+none`` is accepted and ignored. Unknown names raise a ValueError that
-    lists the valid ones.
-    """
-    if isinstance(name, Model):
-        return name
-    parts = [p.strip() for p in str(name).split("+") if p.strip()]
-    if not parts or parts[0] not in FORMS:
-        head = parts[0] if parts else ""
-        raise ValueError(f"unknown model form '{head}'; valid: {', '.join(FORMS)}")
-    model = Model(FORMS[parts[0]])
-    for p in parts[1:]:
-        if p == NONE:
-            continue
-        if p not in EFFECTS:
-            raise ValueError(f"unknown effect '{p}'; valid: {', '.join(EFFECTS)}")
-        model = model + EFFECTS[p]
-    return model

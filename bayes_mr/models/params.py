@@ -22,6 +22,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# Exponents (force, displacement, velocity, duration) of the record scale a
+# plausible range is relative to (ParamSpec.dims), named by the unit they give.
+F_V = (1, 0, -1, 0)  # N·s/m
+F_X = (1, -1, 0, 0)  # N/m
+F_ = (1, 0, 0, 0)  # N
+PER_X = (0, -1, 0, 0)  # 1/m
+PER_X2 = (0, -2, 0, 0)  # 1/m²
+ONE = (0, 0, 0, 0)
+
 
 @dataclass(frozen=True)
 class Scales:

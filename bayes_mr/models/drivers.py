@@ -1,0 +1,104 @@
+"""Driver loops of the compiled simulator: one parameter set, or a batch in parallel.
+
+They allocate their buffers once and call the per-sub-step functions of
+:mod:`bayes_mr.models.kernel` (:func:`~bayes_mr.models.kernel.deriv`,
+:func:`~bayes_mr.models.kernel.rate`, :func:`~bayes_mr.models.kernel.advance`)
+over every sample of a record; :func:`bayes_mr.simulate.simulate` is their
+Python face.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import prange
+
+from .._jit import driver, hot
+from .kernel import K_MASS, L_KIND, L_NS, STRUCT, advance, deriv, rate, substeps
+
+
+@hot(inline="always")
+def _vmax(lay, cst, s, k1, a0, a1, h):
+    if lay[L_KIND] == STRUCT:
+        return abs(s[1]) + abs(k1[1]) * h
+    return max(abs(a0[1]), abs(a1[1]))
+
+
+@hot(inline="always")
+def _write_out(lay, cst, s, f_r, f_d, out):
+    if lay[L_KIND] == STRUCT:
+        out[0] = s[0]
+        out[1] = s[1]
+        out[2] = -f_r / cst[K_MASS]
+        out[3] = f_d
+    else:
+        out[0] = f_r
+        out[1] = f_d
+
+
+@hot
+def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work):
+    ns = lay[L_NS]
+    N = inputs.shape[0]
+    for q in range(ns):
+        s[q] = 0.0
+    for k in range(N):
+        t = k * h
+        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
+        _write_out(lay, cst, s, f_r, f_d, out[k])
+        if not math.isfinite(f_r):
+            for kk in range(k, N):
+                for j in range(out.shape[1]):
+                    out[kk, j] = np.nan
+            return k
+        if k == N - 1:
+            break
+        if use_schedule:
+            n_sub = schedule[k]
+        else:
+            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
+            n_sub = substeps(lay, cst, lam, h)
+            schedule[k] = n_sub
+        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
+    return -1
+
+
+@driver
+def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
+    """Simulate one parameter set from rest over all samples.
+
+    Parameters
+    ----------
+    out : ndarray, shape (N, n_out)
+        Structure: displacement, velocity, absolute acceleration, damper force.
+        Device: force (total), damper force.
+    schedule : int64 ndarray, shape (N-1,)
+        Sub-steps per interval: written when ``use_schedule`` is False, read
+        when True (so perturbed parameter sets integrate on the same grid).
+
+    Returns
+    -------
+    failed_at : int
+        Sample index where the state became non-finite, or -1.
+    """
+    ns = lay[L_NS]
+    s = np.zeros(ns)
+    k1 = np.zeros(ns)
+    work = np.zeros((5, max(ns, 3)))
+    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
+
+
+@driver(parallel=True)
+def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed):
+    """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
+
+    ``out`` has shape (B, N, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
+    When ``use_schedule`` is True every member uses ``schedules[0]``.
+    """
+    B = P.shape[0]
+    for b in prange(B):
+        if use_schedule:
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True)
+        else:
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False)
