@@ -249,7 +249,7 @@ def synthesize(
         ``force`` (damper force) channel.
     """
     from .data.schema import make_record
-    from .noise import band_limited_noise
+    from .synthetic_noise import band_limited_noise
 
     model = get_model(model)
     kind = "structure" if "ground_acceleration" in inputs else "device"
