@@ -75,7 +75,7 @@ class Inputs:
             if "velocity" not in record:
                 raise ValueError(
                     f"{record.attrs.get('source', 'record')}: device test without a velocity channel — "
-                    "read it with bayes_mr.data.read_record, which derives one"
+                    "read it with bayes_mr.data.load, which derives one"
                 )
             rows[:, 1] = record["velocity"].values
             mass = None

@@ -32,7 +32,7 @@ from bayes_mr.data.faults import (
     inject_jump_and_ring,
     inject_spikes,
 )
-from bayes_mr.data.io import read_record, write_record
+from bayes_mr.data import load, write_record
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import apply_quality, report_of
 from bayes_mr.identify import predict
@@ -227,7 +227,7 @@ def test_cli_fit_and_validate_report_masked_and_score_only_the_rest(tmp_path):
     point = results.point_of(results.load(res))
     for p, clipped, summary in ((path, idx, out), (path2, idx2, out2)):
         got = json.loads(summary.read_text())
-        rec = read_record(p)
+        rec = load(p)
         valid = rec["valid"].values
         assert not valid[clipped].any()
         assert got["masked"] == int((~valid).sum()) >= clipped.size > 0
