@@ -92,23 +92,14 @@ def load(
     Raises
     ------
     RecordError
-        One line naming file, column and line (CSV; header = line 1) or sample
-        (netCDF), and the remedy.
+        A bad file, column, cell or time grid, as :func:`~bayes_mr.data.read.read_file`
+        says (one line: file, column, line or sample, remedy); time stamps rounded in
+        the file are accepted (:func:`~bayes_mr.data.checks.check_time`).
 
     Warns
     -----
     UnitWarning
         A channel's magnitude looks like a wrong unit.
-
-    Notes
-    -----
-    Time must increase at every line. Stamps within
-    :data:`~bayes_mr.data.checks.TIME_EXACT` (1e-6) of a step from the uniform
-    grid ``t0 + i·dt`` are float round-off and kept; within
-    :data:`~bayes_mr.data.checks.TIME_JITTER` (1 %) they were rounded in the
-    file (e.g. to µs) and the grid is rebuilt by least squares (attribute
-    ``time_rebuilt``); a step off by more than 2 % (a lost sample, a clock
-    slip) is an error at its line.
     """
     if velocity not in ("derive", None):
         raise ValueError(f"velocity must be 'derive' or None, got {velocity!r}")

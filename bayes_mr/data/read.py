@@ -89,13 +89,7 @@ def read_file(
     dt = (time[-1] - time[0]) / (time.size - 1)
     _units.check_plausible(channels, src, fs=1.0 / dt)
 
-    if mass is not None:
-        attrs["mass"] = float(mass)
-    m = attrs.pop("mass", None)
-    if kind == STRUCTURE and (m is None or not np.isfinite(m) or m <= 0):
-        raise Where(src).error(
-            "a structure test needs the storey mass", "pass --mass KG (or a netCDF 'mass' attribute)"
-        )
+    m = _storey_mass(attrs, mass, kind, src)
     channel_attrs = attrs.pop("_channel_attrs", {})
     ds = make_record(time, channels, kind=kind, mass=m if kind == STRUCTURE else None, source=src, valid=valid)
     for name, a in channel_attrs.items():
@@ -107,3 +101,15 @@ def read_file(
         ds.attrs.setdefault(key, value)
     ds.attrs["masked"] = int((~ds["valid"].values).sum())
     return ds
+
+
+def _storey_mass(attrs: dict, mass: float | None, kind: str, src: str) -> float | None:
+    """The mass [kg] to record (the argument over the file's), taken out of ``attrs``; required for a structure."""
+    if mass is not None:
+        attrs["mass"] = float(mass)
+    m = attrs.pop("mass", None)
+    if kind == STRUCTURE and (m is None or not np.isfinite(m) or m <= 0):
+        raise Where(src).error(
+            "a structure test needs the storey mass", "pass --mass KG (or a netCDF 'mass' attribute)"
+        )
+    return m

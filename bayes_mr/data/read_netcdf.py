@@ -26,10 +26,12 @@ def read_netcdf(
     Parameters
     ----------
     path : pathlib.Path
+        A netCDF file.
     src : str
-        File name for messages.
+        The name errors give the file.
     overrides : dict
-        Column → unit for columns whose variable has no ``units`` attribute.
+        Column → unit for variables without a ``units`` attribute (one that
+        has one and is also given here is an error).
 
     Returns
     -------

@@ -19,6 +19,7 @@ class Fault:
     Attributes
     ----------
     channel : str
+        Channel the fault is in.
     kind : str
         One of :data:`FAULT_KINDS`.
     detected : int
@@ -59,7 +60,9 @@ class QualityReport:
     Attributes
     ----------
     source : str
+        Where the record came from (its ``source`` attribute).
     n_samples : int
+        Length of the record [samples].
     masked : int
         Samples masked by this assessment.
     faults : tuple of Fault
