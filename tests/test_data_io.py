@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import bandwidth, decimate_record, resample, smooth_velocity
 from bayes_mr.data.faults import clean_record, inject_spikes
-from bayes_mr.data import load, write_record
-from bayes_mr.data.nees import convert_nees, load_packaged, main as nees_main
+from bayes_mr.data.nees import convert_nees, load_packaged
+from bayes_mr.data.nees import main as nees_main
 from bayes_mr.data.quality import apply_quality
 from bayes_mr.data.schema import MIN_SAMPLES, RecordError, make_record
 from bayes_mr.data.units import UnitWarning, parse_unit_options
@@ -606,3 +607,19 @@ def test_packaged_file_is_the_converted_raw_file(tmp_path, nees):
     fresh = load(out, quality=False, velocity=None)
     for name in ("displacement", "velocity", "voltage", "force"):
         np.testing.assert_array_equal(fresh[name].values, nees[name].values)
+
+
+def test_load_composes_the_steps(tmp_path):
+    """load() is read_file → with_velocity → apply_quality → trim_excited, nothing more."""
+    from bayes_mr.data.derive import with_velocity
+    from bayes_mr.data.read import read_file
+    from bayes_mr.data.trim import trim_excited
+
+    p = device_csv(tmp_path)
+    by_hand = apply_quality(with_velocity(read_file(p)))
+    xr.testing.assert_identical(load(p), by_hand)
+    assert list(load(p).data_vars) == ["displacement", "force", "velocity", "valid"]
+    trimmed, report = trim_excited(by_hand)
+    ds = load(p, trim=True)
+    assert json.loads(ds.attrs.pop("trim")) == json.loads(json.dumps(report))
+    xr.testing.assert_identical(ds, trimmed)

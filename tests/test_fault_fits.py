@@ -24,6 +24,7 @@ import pytest
 
 from bayes_mr import results
 from bayes_mr.cli import main
+from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import decimate_record
 from bayes_mr.data.faults import (
     clean_record,
@@ -32,7 +33,6 @@ from bayes_mr.data.faults import (
     inject_jump_and_ring,
     inject_spikes,
 )
-from bayes_mr.data import load, write_record
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import apply_quality, report_of
 from bayes_mr.identify import predict

@@ -18,7 +18,14 @@ import numpy as np
 import pandas as pd
 
 from . import units as _units
-from .checks import CSV_SUFFIXES, check_columns, check_overrides, check_time, file_suffix, one_line
+from .checks import (
+    CSV_SUFFIXES,
+    check_columns,
+    check_overrides,
+    check_time,
+    file_suffix,
+    one_line,
+)
 from .schema import MIN_SAMPLES, STRUCTURE, Where, kind_of
 
 

@@ -11,7 +11,16 @@ import xarray as xr
 from ..derive import savgol_attrs, smooth_velocity
 from ..schema import DEVICE, STRUCTURE
 from .config import QualityConfig
-from .detectors import dilate, end_events, flats, jumps, rails, runs, spikes, velocity_range
+from .detectors import (
+    dilate,
+    end_events,
+    flats,
+    jumps,
+    rails,
+    runs,
+    spikes,
+    velocity_range,
+)
 from .report import FAULT_KINDS, Fault, QualityReport, Repair
 
 #: Channels that drive a simulation (repaired across their own faults).
@@ -45,7 +54,7 @@ def default_channels(ds: xr.Dataset) -> tuple[str, ...]:
     )
 
 
-def assess(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> tuple[np.ndarray, QualityReport]:
+def assess(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> tuple[np.ndarray, QualityReport]:  # noqa: B008 — frozen
     """Detect faults in a record.
 
     Parameters
@@ -231,7 +240,7 @@ def _repair_plan(ds: xr.Dataset, report: QualityReport) -> dict[str, np.ndarray]
     return plan
 
 
-def apply_quality(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> xr.Dataset:
+def apply_quality(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> xr.Dataset:  # noqa: B008 — frozen
     """Assess a record and return a copy with the mask, the report and repaired inputs.
 
     Sets ``valid`` (the existing mask AND the new one), attributes ``masked``
