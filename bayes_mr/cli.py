@@ -55,9 +55,9 @@ def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
 
 
 def _read(path: str, args, *, what: str = "record"):
-    from .data import read_record
+    from .data import load
 
-    return read_record(
+    return load(
         path, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
         quality=not getattr(args, "no_quality", False), trim=getattr(args, "trim", False),
     )
@@ -77,7 +77,7 @@ def _write_json(data: dict, path: str | None) -> None:
 # --- verbs -----------------------------------------------------------------------------
 
 def cmd_simulate(args) -> int:
-    from .data.io import read_inputs, write_record
+    from .data import read_inputs, write_record
     from .models import EFFECTS, get_model
     from .signals import make_signal
     from .simulate import synthesize

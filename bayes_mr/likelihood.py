@@ -66,13 +66,13 @@ def channel_noise(record: xr.Dataset, channels: tuple[str, ...]) -> np.ndarray:
 
     From the record's ``noise_sd_<channel>`` attribute (simulated records; a
     measured record after a noise-floor estimate), else estimated by
-    :func:`bayes_mr.data.noise.noise_floor` (quiet segment, else differencing).
+    :func:`bayes_mr.data.noise_floor.noise_floor` (quiet segment, else differencing).
     """
     out = []
     missing = [c for c in channels if f"noise_sd_{c}" not in record.attrs]
     floor = {}
     if missing:
-        from .data.noise import noise_floor
+        from .data.noise_floor import noise_floor
 
         floor = noise_floor(record, channels=missing)
     for c in channels:

@@ -76,7 +76,7 @@ class Inputs:
             if "velocity" not in record:
                 raise ValueError(
                     f"{record.attrs.get('source', 'record')}: device test without a velocity channel — "
-                    "read it with bayes_mr.data.read_record, which derives one"
+                    "read it with bayes_mr.data.load, which derives one"
                 )
             rows[:, 1] = record["velocity"].values
             mass = None
@@ -271,7 +271,7 @@ def synthesize(
 
 def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float | None):
     """``x ↦ (x + noise, its SD)``: band-limited noise of SD ``noise`` × RMS(x); none when ``noise`` ≤ 0."""
-    from .noise import band_limited_noise
+    from .synthetic_noise import band_limited_noise
 
     def noisy(x):
         if noise <= 0:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bayes_mr.cli import main
-from bayes_mr.data import read_record
+from bayes_mr.data import load
 
 FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
             "masked", "trained", "diverged", "wall_s"}
@@ -34,21 +34,21 @@ def device_csv(tmp_path_factory):
 
 
 def test_simulate_writes_a_valid_record(structure_csv, device_csv):
-    rec = read_record(structure_csv, mass=50)
+    rec = load(structure_csv, mass=50)
     assert rec.attrs["kind"] == "structure" and rec.sizes["time"] == 6000
-    dev = read_record(device_csv)
+    dev = load(device_csv)
     assert dev.attrs["kind"] == "device"
     assert dev["force"].values.mean() < -50  # the force offset is in the data
 
 
 def test_simulate_from_an_input_csv(tmp_path, structure_csv):
-    rec = read_record(structure_csv, mass=50)
+    rec = load(structure_csv, mass=50)
     inp = tmp_path / "in.csv"
     inp.write_text("time,ground_acceleration [g]\n" + "\n".join(
         f"{t},{a / 9.80665}" for t, a in zip(rec["time"].values, rec["ground_acceleration"].values)))
     out = tmp_path / "out.nc"
     assert main(["simulate", "--model", "lugre", "--input", str(inp), "--mass", "50", "-o", str(out)]) == 0
-    sim = read_record(out)
+    sim = load(out)
     np.testing.assert_allclose(sim["ground_acceleration"].values, rec["ground_acceleration"].values, rtol=1e-9)
 
 

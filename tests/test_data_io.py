@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import bandwidth, decimate_record, resample, smooth_velocity
 from bayes_mr.data.faults import clean_record, inject_spikes
-from bayes_mr.data.io import read_record, write_record
-from bayes_mr.data.nees import convert_nees, load_packaged, main as nees_main
+from bayes_mr.data.nees import convert_nees, load_packaged
+from bayes_mr.data.nees import main as nees_main
 from bayes_mr.data.quality import apply_quality
 from bayes_mr.data.schema import MIN_SAMPLES, RecordError, make_record
 from bayes_mr.data.units import UnitWarning, parse_unit_options
@@ -71,7 +72,7 @@ def strcols(*cols):
 
 def test_missing_file(tmp_path):
     with pytest.raises(RecordError) as e:
-        read_record(tmp_path / "nope.csv")
+        load(tmp_path / "nope.csv")
     msg = one_line_error(e)
     assert "nope.csv" in msg and "not found" in msg
 
@@ -80,7 +81,7 @@ def test_unreadable_gzip(tmp_path):
     p = tmp_path / "broken.csv.gz"
     p.write_bytes(b"\x1f\x8b\x08\x00garbage that is not deflate data")
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "broken.csv.gz" in msg and "cannot read" in msg
 
@@ -89,14 +90,14 @@ def test_unknown_file_type(tmp_path):
     p = tmp_path / "rec.txt"
     p.write_text("time,displacement,force\n")
     with pytest.raises(RecordError, match="unknown file type"):
-        read_record(p)
+        load(p)
 
 
 def test_missing_required_column(tmp_path):
     t, x, _ = device_rows()
     p = write_csv(tmp_path / "nof.csv", ["time", "displacement"], [t, x])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "nof.csv" in msg and "column 'force'" in msg and "missing" in msg
 
@@ -105,7 +106,7 @@ def test_unknown_column_lists_valid_ones(tmp_path):
     t, x, f = device_rows()
     p = write_csv(tmp_path / "extra.csv", ["time", "displacement", "force", "temperature"], [t, x, f, f])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "column 'temperature'" in msg and "line 1" in msg
     for valid in ("time", "displacement", "force", "velocity", "voltage"):
@@ -118,7 +119,7 @@ def test_non_numeric_cell_names_line(tmp_path):
     cols[2][7] = "12,5".replace(",", ";")  # a decimal comma gone wrong
     p = write_csv(tmp_path / "text.csv", ["time", "displacement", "force"], cols)
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     # data row 7 (0-based) is file line 9: header is line 1
     assert "text.csv" in msg and "column 'force'" in msg and "line 9" in msg and "non-numeric" in msg
@@ -130,7 +131,7 @@ def test_empty_cell(tmp_path):
     cols[1][20] = ""
     p = write_csv(tmp_path / "hole.csv", ["time", "displacement", "force"], cols)
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "column 'displacement'" in msg and "line 22" in msg and "empty cell" in msg
 
@@ -143,7 +144,7 @@ def test_nan_inf_first_offending_line(tmp_path, bad, word):
     cols[1][30] = bad       # … this one comes first
     p = write_csv(tmp_path / "nan.csv", ["time", "displacement", "force"], cols)
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "column 'displacement'" in msg and "line 32" in msg and word in msg
 
@@ -154,7 +155,7 @@ def test_too_many_fields(tmp_path):
     cols[2][10] = cols[2][10] + ",3.0"
     p = write_csv(tmp_path / "wide.csv", ["time", "displacement", "force"], cols)
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     assert "line 12" in one_line_error(e)
 
 
@@ -164,7 +165,7 @@ def test_non_increasing_time(tmp_path):
     t[100] = t[99]
     p = write_csv(tmp_path / "rep.csv", ["time", "displacement", "force"], [t, x, f])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "column 'time'" in msg and "line 102" in msg and "does not increase" in msg
 
@@ -175,7 +176,7 @@ def test_non_uniform_time(tmp_path):
     t[200:] += 0.5 / FS  # a half-sample gap: a lost sample or a clock slip
     p = write_csv(tmp_path / "gap.csv", ["time", "displacement", "force"], [t, x, f])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "column 'time'" in msg and "line 202" in msg and "non-uniform" in msg
 
@@ -186,20 +187,20 @@ def test_rounded_time_is_rebuilt(tmp_path):
         tmp_path / "rounded.csv", ["time", "displacement", "force"],
         [[f"{v:.6f}" for v in t], strcols(x)[0], strcols(f)[0]],
     )
-    ds = read_record(p)
+    ds = load(p)
     assert "time_rebuilt" in ds.attrs
     # rounding to 1 µs leaves the step known to about 1e-6 of itself
     np.testing.assert_allclose(np.diff(ds["time"].values), 1 / 4096.0, rtol=1e-6)
     assert np.ptp(np.diff(ds["time"].values)) < 1e-15
     # jitter within 1e-6 of a step is float round-off: kept as written
-    assert "time_rebuilt" not in read_record(device_csv(tmp_path)).attrs
+    assert "time_rebuilt" not in load(device_csv(tmp_path)).attrs
 
 
 def test_too_few_samples(tmp_path):
     t, x, f = device_rows(n=MIN_SAMPLES - 1)
     p = write_csv(tmp_path / "short.csv", ["time", "displacement", "force"], [t, x, f])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "short.csv" in msg and f"only {MIN_SAMPLES - 1} samples" in msg
 
@@ -208,26 +209,26 @@ def test_structure_needs_mass(tmp_path):
     ds = clean_record("sweep", "structure", seed=1, duration=1.0, fs=1024.0, amplitude=1.0)
     p = write_record(ds, tmp_path / "frame.csv")
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "frame.csv" in msg and "--mass" in msg
-    assert read_record(p, mass=42.0).attrs["mass"] == 42.0
+    assert load(p, mass=42.0).attrs["mass"] == 42.0
     nc = write_record(ds, tmp_path / "frame.nc")
-    assert read_record(nc).attrs["mass"] == ds.attrs["mass"]
-    assert read_record(nc, mass=7.0).attrs["mass"] == 7.0  # the argument overrides the file
+    assert load(nc).attrs["mass"] == ds.attrs["mass"]
+    assert load(nc, mass=7.0).attrs["mass"] == 7.0  # the argument overrides the file
 
 
 def test_duplicate_column(tmp_path):
     t, x, f = device_rows()
     p = write_csv(tmp_path / "dup.csv", ["time", "displacement", "force", "force [kN]"], [t, x, f, f])
     with pytest.raises(RecordError, match="duplicate"):
-        read_record(p)
+        load(p)
 
 
 def test_trailing_comma_and_blank_line_tolerated(tmp_path):
     p = device_csv(tmp_path, trailing_comma=True)
     p.write_text(p.read_text() + "\n\n")
-    ds = read_record(p, velocity=None)
+    ds = load(p, velocity=None)
     _, _, f = device_rows()
     np.testing.assert_array_equal(ds["force"].values, f)
     assert set(ds.data_vars) == {"displacement", "force", "valid"}
@@ -255,7 +256,7 @@ def test_header_units_convert_to_si(tmp_path, header, unit, factor):
     p = write_csv(tmp_path / "u.csv", ["time"] + names, [t] + list(raw.values()))
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnitWarning)
-        ds = read_record(p, velocity=None)
+        ds = load(p, velocity=None)
     np.testing.assert_allclose(ds[header].values, si[header], rtol=1e-12, atol=1e-15)
     assert ds[header].attrs["units"] in ("m", "N", "V", "m/s")
 
@@ -269,7 +270,7 @@ def test_structure_units_g_and_ms(tmp_path):
                                        "acceleration [cm/s^2]"], cols)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnitWarning)
-        back = read_record(p, mass=50.0)
+        back = load(p, mass=50.0)
     for name in ("ground_acceleration", "displacement", "acceleration"):
         np.testing.assert_allclose(back[name].values, ds[name].values, rtol=1e-12)
     np.testing.assert_allclose(back.attrs["fs"], 1024.0, rtol=1e-9)
@@ -278,8 +279,8 @@ def test_structure_units_g_and_ms(tmp_path):
 def test_units_argument_and_cli_form(tmp_path):
     t, x, f = device_rows()
     p = write_csv(tmp_path / "cm.csv", ["time", "displacement", "force"], [t, x * 100, f])
-    a = read_record(p, units={"displacement": "cm"})
-    b = read_record(p, units=["displacement=cm"])
+    a = load(p, units={"displacement": "cm"})
+    b = load(p, units=["displacement=cm"])
     np.testing.assert_allclose(a["displacement"].values, x, rtol=1e-12)
     np.testing.assert_array_equal(a["displacement"].values, b["displacement"].values)
     assert parse_unit_options(["displacement=cm", "force = kN"]) == {"displacement": "cm", "force": "kN"}
@@ -291,24 +292,24 @@ def test_unknown_unit_lists_accepted(tmp_path):
     t, x, f = device_rows()
     p = write_csv(tmp_path / "furl.csv", ["time", "displacement [furlong]", "force"], [t, x, f])
     with pytest.raises(RecordError) as e:
-        read_record(p)
+        load(p)
     msg = one_line_error(e)
     assert "furl.csv" in msg and "column 'displacement'" in msg and "furlong" in msg
     assert all(u in msg for u in ("m", "cm", "mm", "in"))
     with pytest.raises(RecordError, match=r"column 'force'.*unknown unit 'N·m'"):
-        read_record(device_csv(tmp_path), units={"force": "N·m"})
+        load(device_csv(tmp_path), units={"force": "N·m"})
 
 
 def test_unit_conflicts_and_unknown_targets(tmp_path):
     t, x, f = device_rows()
     p = write_csv(tmp_path / "mm.csv", ["time", "displacement [mm]", "force"], [t, x * 1e3, f])
     with pytest.raises(RecordError, match="header says"):
-        read_record(p, units={"displacement": "cm"})
-    read_record(p, units={"displacement": "MM"})  # the same unit, spelt differently: fine
+        load(p, units={"displacement": "cm"})
+    load(p, units={"displacement": "MM"})  # the same unit, spelt differently: fine
     with pytest.raises(RecordError, match="column 'velocity'.*does not have"):
-        read_record(p, units={"velocity": "cm/s"})
+        load(p, units={"velocity": "cm/s"})
     with pytest.raises(RecordError, match="column 'temp'.*unknown column"):
-        read_record(p, units={"temp": "K"})
+        load(p, units={"temp": "K"})
 
 
 @pytest.mark.parametrize(
@@ -327,7 +328,7 @@ def test_implausible_magnitude_warns(tmp_path, column, scale, hint):
     cols[column] = cols[column] * scale
     p = write_csv(tmp_path / "w.csv", list(cols), list(cols.values()))
     with pytest.warns(UnitWarning, match=hint) as rec:
-        read_record(p, velocity=None)
+        load(p, velocity=None)
     assert any("w.csv" in str(w.message) and f"column '{column}'" in str(w.message) for w in rec)
 
 
@@ -337,7 +338,7 @@ def test_ground_acceleration_in_g_warns(tmp_path):
     cols = [ds["time"].values, ag_in_g, ds["displacement"].values, ds["acceleration"].values]
     p = write_csv(tmp_path / "g.csv", ["time", "ground_acceleration", "displacement", "acceleration"], cols)
     with pytest.warns(UnitWarning, match="ground_acceleration=g") as rec:
-        out = read_record(p, mass=50.0)
+        out = load(p, mass=50.0)
     assert any("g.csv" in str(w.message) for w in rec if issubclass(w.category, UnitWarning))
     # a warning, not a conversion: the data are read as written
     np.testing.assert_allclose(out["ground_acceleration"].values, ag_in_g)
@@ -347,7 +348,7 @@ def test_si_record_does_not_warn(tmp_path):
     t, x, f = device_rows()
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        out = read_record(device_csv(tmp_path))
+        out = load(device_csv(tmp_path))
     assert [str(w.message) for w in rec if issubclass(w.category, UnitWarning)] == []
     np.testing.assert_allclose(out["force"].values, f)
 
@@ -364,14 +365,14 @@ def test_derived_velocity_is_smooth_and_accurate(tmp_path):
     x = x_true + 2e-6 * rng.standard_normal(t.size)
     f = 50 * np.tanh(v_true / 0.01) + 0.5 * rng.standard_normal(t.size)
     p = write_csv(tmp_path / "nov.csv", ["time", "displacement", "force"], [t, x, f])
-    ds = read_record(p)
+    ds = load(p)
     v = ds["velocity"]
     assert v.attrs["derived"] == "savgol" and v.attrs["savgol_window"] > 5
     assert 7 <= v.attrs["bandwidth_hz"] < 30
     err = np.abs(v.values - v_true)[50:-50].max() / np.abs(v_true).max()
     raw = np.abs(np.diff(x) * fs - v_true[:-1])[50:-50].max() / np.abs(v_true).max()
     assert err < 0.01 < raw  # a forward difference is an order of magnitude worse
-    assert "velocity" not in read_record(p, velocity=None)
+    assert "velocity" not in load(p, velocity=None)
     direct = smooth_velocity(x, 1 / fs, window=v.attrs["savgol_window"])
     np.testing.assert_allclose(direct, v.values)
 
@@ -437,7 +438,7 @@ def test_round_trip(tmp_path, suffix, kind):
     ds = clean_record("random", kind, seed=5, duration=1.0, fs=1024.0,
                       amplitude=3e-3 if kind == "device" else 1.0)
     p = write_record(ds, tmp_path / f"rt.{suffix}")
-    back = read_record(p, mass=ds.attrs.get("mass") if suffix != "nc" else None)
+    back = load(p, mass=ds.attrs.get("mass") if suffix != "nc" else None)
     assert back.attrs["kind"] == kind
     np.testing.assert_array_equal(back["time"].values, ds["time"].values)
     for name in ds.data_vars:
@@ -451,7 +452,7 @@ def test_round_trip_netcdf_keeps_mask_report_and_attrs(tmp_path):
     faulty, _ = inject_spikes(clean, "force", 3, 5.0, 0)
     ds = apply_quality(faulty)
     assert ds.attrs["masked"] > 0
-    back = read_record(write_record(ds, tmp_path / "q.nc"))
+    back = load(write_record(ds, tmp_path / "q.nc"))
     for name in ds.data_vars:
         np.testing.assert_array_equal(back[name].values, ds[name].values)
     assert back.attrs["quality"] == ds.attrs["quality"]
@@ -460,8 +461,8 @@ def test_round_trip_netcdf_keeps_mask_report_and_attrs(tmp_path):
 
 
 def test_round_trip_derived_velocity(tmp_path):
-    ds = read_record(device_csv(tmp_path))
-    back = read_record(write_record(ds, tmp_path / "d.nc"))
+    ds = load(device_csv(tmp_path))
+    back = load(write_record(ds, tmp_path / "d.nc"))
     assert back["velocity"].attrs["derived"] == "savgol"
     xr.testing.assert_equal(back, ds)
 
@@ -576,7 +577,7 @@ def _raw_nees(path: Path, n=400, bad=None, drop=None):
 def test_convert_nees_small_raw(tmp_path):
     raw, cols = _raw_nees(tmp_path / "raw.csv.gz")
     out = convert_nees(raw, tmp_path / "out.csv.gz")
-    ds = read_record(out, quality=False)
+    ds = load(out, quality=False)
     assert ds.attrs["fs"] == pytest.approx(3004.8, rel=1e-9)  # rebuilt from fs, not the rounded t
     np.testing.assert_allclose(ds["displacement"].values, cols["D"] * 0.01, rtol=1e-7)
     np.testing.assert_allclose(ds["velocity"].values, cols["V"] * 0.01, rtol=1e-7)
@@ -603,6 +604,22 @@ def test_convert_nees_errors_write_nothing(tmp_path):
 @pytest.mark.skipif(not RAW_NEES.exists(), reason="shared raw NEES file not present")
 def test_packaged_file_is_the_converted_raw_file(tmp_path, nees):
     out = convert_nees(RAW_NEES, tmp_path / "nees.csv.gz")
-    fresh = read_record(out, quality=False, velocity=None)
+    fresh = load(out, quality=False, velocity=None)
     for name in ("displacement", "velocity", "voltage", "force"):
         np.testing.assert_array_equal(fresh[name].values, nees[name].values)
+
+
+def test_load_composes_the_steps(tmp_path):
+    """load() is read_file → with_velocity → apply_quality → trim_excited, nothing more."""
+    from bayes_mr.data.derive import with_velocity
+    from bayes_mr.data.read import read_file
+    from bayes_mr.data.trim import trim_excited
+
+    p = device_csv(tmp_path)
+    by_hand = apply_quality(with_velocity(read_file(p)))
+    xr.testing.assert_identical(load(p), by_hand)
+    assert list(load(p).data_vars) == ["displacement", "force", "velocity", "valid"]
+    trimmed, report = trim_excited(by_hand)
+    ds = load(p, trim=True)
+    assert json.loads(ds.attrs.pop("trim")) == json.loads(json.dumps(report))
+    xr.testing.assert_identical(ds, trimmed)

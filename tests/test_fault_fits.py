@@ -24,6 +24,7 @@ import pytest
 
 from bayes_mr import results
 from bayes_mr.cli import main
+from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import decimate_record
 from bayes_mr.data.faults import (
     clean_record,
@@ -32,7 +33,6 @@ from bayes_mr.data.faults import (
     inject_jump_and_ring,
     inject_spikes,
 )
-from bayes_mr.data.io import read_record, write_record
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import apply_quality, report_of
 from bayes_mr.identify import predict
@@ -227,7 +227,7 @@ def test_cli_fit_and_validate_report_masked_and_score_only_the_rest(tmp_path):
     point = results.point_of(results.load_result(res))
     for p, clipped, summary in ((path, idx, out), (path2, idx2, out2)):
         got = json.loads(summary.read_text())
-        rec = read_record(p)
+        rec = load(p)
         valid = rec["valid"].values
         assert not valid[clipped].any()
         assert got["masked"] == int((~valid).sum()) >= clipped.size > 0

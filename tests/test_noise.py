@@ -8,15 +8,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from bayes_mr.data.io import read_record, write_record
+from bayes_mr.data import load, write_record
 from bayes_mr.data.nees import load_packaged
-from bayes_mr.data.noise import (
-    differencing_sd,
-    find_quiet,
-    noise_floor,
-    trim_excited,
-)
+from bayes_mr.data.noise_floor import differencing_sd, find_quiet, noise_floor
 from bayes_mr.data.schema import make_record
+from bayes_mr.data.trim import trim_excited
 
 FS = 2048.0
 SD = {"displacement": 2e-5, "force": 0.5}
@@ -66,8 +62,23 @@ def test_noise_record_recovers_sd(seed):
 
 def test_noise_record_from_a_file(tmp_path):
     p = write_record(no_input_record(7), tmp_path / "noinput.csv")
-    nf = noise_floor(rig_record(7), noise_record=p)
+    nf = noise_floor(rig_record(7), noise_record=load(p, quality=False, velocity=None))
     assert nf["force"] == pytest.approx(SD["force"], rel=0.1)
+    # load() reads the no-input file itself and stores the floor in the record
+    rec = load(write_record(rig_record(7), tmp_path / "rig.csv"), noise_record=p)
+    assert rec.attrs["noise_sd_force"] == pytest.approx(nf["force"], rel=1e-12)
+    assert json.loads(rec.attrs["noise_floor"])["methods"]["force"] == "noise_record"
+
+
+def test_load_noise_floor_before_trim(tmp_path):
+    p = write_record(rig_record(15), tmp_path / "rig.csv")
+    plain = load(p)
+    assert not any(k.startswith("noise_sd_") for k in plain.attrs)  # on request only
+    ds = load(p, noise_floor=True, trim=True)
+    nf = noise_floor(plain)  # estimated on the untrimmed record, whose quiet parts trimming cuts
+    for name, sd in nf.items():
+        assert ds.attrs[f"noise_sd_{name}"] == sd
+    assert json.loads(ds.attrs["trim"])["trimmed"]
 
 
 @pytest.mark.parametrize("seed", [4, 5, 6])
@@ -146,12 +157,12 @@ def test_trim_leaves_an_always_excited_record():
     assert not rep["trimmed"] and out is ds and "reason" in rep
 
 
-def test_read_record_trim(tmp_path):
+def test_load_trim(tmp_path):
     p = write_record(rig_record(15), tmp_path / "rig.csv")
-    ds = read_record(p, trim=True)
+    ds = load(p, trim=True)
     rep = json.loads(ds.attrs["trim"])
     assert rep["trimmed"] and ds.sizes["time"] < 10 * FS
-    assert "trim" not in read_record(p).attrs  # trimming is on request
+    assert "trim" not in load(p).attrs  # trimming is on request
 
 
 def test_real_record_noise_and_trim():

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from bayes_mr.data import load, write_record
 from bayes_mr.data.faults import (
     clean_record,
     inject_clipping,
@@ -15,7 +16,6 @@ from bayes_mr.data.faults import (
     inject_jump_and_ring,
     inject_spikes,
 )
-from bayes_mr.data.io import read_record, write_record
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import QualityConfig, apply_quality, assess, report_of
 
@@ -300,10 +300,10 @@ def test_derived_velocity_follows_repaired_displacement(tmp_path):
     clean = device("sweep", seed=91, velocity=False)
     faulty, idx = inject_spikes(clean, "displacement", 5, 3.0, 92)
     p = write_record(faulty, tmp_path / "spiky.csv")
-    ds = read_record(p)
+    ds = load(p)
     assert ds["velocity"].attrs["derived"] == "savgol"
     assert not ds["valid"].values[idx].any()
-    truth = read_record(write_record(clean, tmp_path / "clean.csv"))["velocity"].values
+    truth = load(write_record(clean, tmp_path / "clean.csv"))["velocity"].values
     v = ds["velocity"].values
     # re-derived from the repaired displacement: no spike derivative left
     assert np.abs(v - truth).max() < 0.1 * np.abs(truth).max()
@@ -320,11 +320,11 @@ def test_thresholds_can_be_overridden():
         assess(ds, QualityConfig(channels=("temperature",)))
 
 
-def test_read_record_runs_quality(tmp_path):
+def test_load_runs_quality(tmp_path):
     ds, idx = inject_dropout(device("random", seed=95), "force", 0.5, 30, value=0.0)
     p = write_record(ds, tmp_path / "drop.csv.gz")
-    rec = read_record(p)
+    rec = load(p)
     assert not rec["valid"].values[idx].any() and rec.attrs["masked"] > 0
     assert "flat" in report_of(rec)["faults"]["force"]
-    off = read_record(p, quality=False)
+    off = load(p, quality=False)
     assert off["valid"].values.all() and "quality" not in off.attrs

@@ -3,7 +3,8 @@
 * :func:`smooth_velocity` — velocity from displacement by a Savitzky–Golay
   derivative, as the thesis differentiated displacement to get velocity, but
   smoothing: a raw forward difference multiplies the displacement noise by
-  ``√2/dt``.
+  ``√2/dt``; :func:`with_velocity` adds it to a device record that has none
+  (the "derive" step of :func:`bayes_mr.data.load`).
 * :func:`resample` — a ground motion onto a new sampling rate; **linear
   interpolation is the default**, as in the thesis (El Centro at 50 Hz → 4000 Hz),
   a band-limited (polyphase / FFT) alternative on request.
@@ -18,6 +19,8 @@ from fractions import Fraction
 import numpy as np
 import xarray as xr
 from scipy import signal
+
+from .schema import UNITS
 
 #: Fraction of the (detrended) signal power below the record's bandwidth.
 BANDWIDTH_POWER = 0.99
@@ -147,6 +150,53 @@ def smooth_velocity(
     if return_info:
         return v, {"window": int(window), "polyorder": int(polyorder), "bandwidth_hz": float(f_band)}
     return v
+
+
+def savgol_attrs(info: dict) -> dict:
+    """Attributes of a velocity derived by :func:`smooth_velocity` (its ``info``)."""
+    return {
+        "savgol_window": info["window"],
+        "savgol_polyorder": info["polyorder"],
+        "bandwidth_hz": info["bandwidth_hz"],
+    }
+
+
+def with_velocity(ds: xr.Dataset) -> xr.Dataset:
+    """A device record with a ``velocity`` derived from displacement (the record itself if it has one).
+
+    The derivative is :func:`smooth_velocity`'s Savitzky–Golay differentiator
+    with the window chosen for the record's bandwidth; the new variable is
+    marked ``derived="savgol"`` with ``savgol_window``, ``savgol_polyorder``
+    and ``bandwidth_hz`` [Hz] (quality control re-derives it from a repaired
+    displacement and does not assess it itself).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Device-test record in the package schema.
+
+    Returns
+    -------
+    xarray.Dataset
+        A new record with ``velocity`` [m/s] placed after the file's channels.
+    """
+    if "velocity" in ds:
+        return ds
+    t = ds["time"].values
+    # the step over the whole span, as the reader checked the grid (the
+    # ``dt`` attribute is the median step, which differs in the last bits)
+    dt = (t[-1] - t[0]) / (t.size - 1)
+    v, info = smooth_velocity(ds["displacement"].values, dt, return_info=True)
+    attrs = {
+        "units": UNITS["velocity"],
+        "derived": "savgol",
+        **savgol_attrs(info),
+        "description": "Savitzky-Golay derivative of displacement (bayes_mr.data.derive.smooth_velocity)",
+    }
+    out = ds.assign(velocity=("time", v, attrs))
+    # velocity among the channels, before the mask (the order CSVs are written in)
+    names = [str(n) for n in ds.data_vars if n != "valid"] + ["velocity"]
+    return out[names + (["valid"] if "valid" in ds else [])]
 
 
 def resample(

@@ -187,7 +187,7 @@ def read_peer_at2(path: str | PathLike) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     path : path-like
-        Plain text or ``.gz`` file.
+        The ``.AT2`` file, plain or gzip-compressed (``.gz``).
 
     Returns
     -------

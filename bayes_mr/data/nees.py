@@ -23,8 +23,10 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .io import _At, _publish, read_record
-from .quality import QualityConfig
+from .quality import QualityConfig, apply_quality
+from .read import read_file
+from .schema import Where
+from .write import publish
 
 #: Significant digits written to the packaged CSV: the raw file has at most 8.
 DIGITS = 8
@@ -78,34 +80,34 @@ def convert_nees(raw_path: str | os.PathLike, out_path: str | os.PathLike) -> Pa
     raw_path, out_path = Path(raw_path), Path(out_path)
     src = str(raw_path)
     if not raw_path.exists():
-        raise _At(src).error("file not found", "check the path to the raw NEES file")
+        raise Where(src).error("file not found", "check the path to the raw NEES file")
     name = out_path.name.lower()
     if not name.endswith((".csv", ".csv.gz")):
-        raise _At(str(out_path)).error("unknown output type", "write .csv or .csv.gz")
+        raise Where(str(out_path)).error("unknown output type", "write .csv or .csv.gz")
     if not out_path.parent.is_dir():
-        raise _At(str(out_path)).error("the directory does not exist", "create it first")
+        raise Where(str(out_path)).error("the directory does not exist", "create it first")
     try:
         df = pd.read_csv(raw_path, dtype=str, keep_default_na=False, index_col=False)
     except Exception as exc:  # noqa: BLE001 — gzip / parser errors become one line
-        raise _At(src).error(f"cannot read ({' '.join(str(exc).split())[:150]})", "check the raw file") from None
+        raise Where(src).error(f"cannot read ({' '.join(str(exc).split())[:150]})", "check the raw file") from None
     df.columns = [str(c).strip() for c in df.columns]
     for col in _RAW_COLUMNS:
         if col not in df.columns:
-            raise _At(src, col, 1).error("missing column", f"the raw NEES file has columns {', '.join(_RAW_COLUMNS)}")
+            raise Where(src, col, 1).error("missing column", f"the raw NEES file has columns {', '.join(_RAW_COLUMNS)}")
     data = {}
     for col in ("D", "Y", "V", "F"):
         numeric = pd.to_numeric(df[col].str.strip(), errors="coerce").to_numpy(float)
         bad = ~np.isfinite(numeric)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise _At(src, col, i + 2).error(f"bad value '{df[col].iloc[i]}'", "fix or remove the line")
+            raise Where(src, col, i + 2).error(f"bad value '{df[col].iloc[i]}'", "fix or remove the line")
         data[col] = numeric
     try:
         fs = float(df["fs"].iloc[0])
     except ValueError:
         fs = float("nan")
     if not np.isfinite(fs) or fs <= 0:
-        raise _At(src, "fs", 2).error("no sampling rate in the first data row", "the raw file gives fs once, on line 2")
+        raise Where(src, "fs", 2).error("no sampling rate in the first data row", "the raw file gives fs once, on line 2")
     n = len(df)
     out = pd.DataFrame(
         {
@@ -127,11 +129,11 @@ def convert_nees(raw_path: str | os.PathLike, out_path: str | os.PathLike) -> Pa
             float_format=f"%.{DIGITS}g",
             compression="gzip" if name.endswith(".gz") else None,
         )
-        _publish(tmp, out_path)
+        publish(tmp, out_path)
     except Exception as exc:  # noqa: BLE001 — clean up, then one line
         if os.path.exists(tmp):
             os.unlink(tmp)
-        raise _At(str(out_path)).error(f"cannot write ({' '.join(str(exc).split())[:150]})", "check the path") from None
+        raise Where(str(out_path)).error(f"cannot write ({' '.join(str(exc).split())[:150]})", "check the path") from None
     return out_path
 
 
@@ -144,7 +146,7 @@ def load_packaged(name: str = "nees-ranran-50", quality: bool | QualityConfig = 
         One of :data:`PACKAGED` (``"nees-ranran-50"``: MR damper, random
         displacement 0–50 Hz, random on/off voltage, 3004.8 Hz, 74,068 samples).
     quality : bool or QualityConfig
-        Run quality control on load (see :func:`bayes_mr.data.read_record`).
+        Run quality control on load (see :func:`bayes_mr.data.load`).
 
     Returns
     -------
@@ -157,14 +159,12 @@ def load_packaged(name: str = "nees-ranran-50", quality: bool | QualityConfig = 
     filename, attrs = PACKAGED[name]
     ref = resources.files("bayes_mr.data").joinpath("resources", filename)
     with resources.as_file(ref) as path:
-        ds = read_record(path, quality=False, velocity=None)
+        ds = read_file(path)
     ds.attrs["source"] = name
     ds.attrs.update(attrs)
     ds["velocity"].attrs["description"] = "piston velocity as supplied by the source (derived there)"
     ds["voltage"].attrs["description"] = "command voltage to the damper's current driver"
     if quality is not False:
-        from .quality import apply_quality
-
         ds = apply_quality(ds, quality if isinstance(quality, QualityConfig) else QualityConfig())
     return ds
 

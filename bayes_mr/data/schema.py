@@ -1,7 +1,7 @@
 """The one record schema every source is read into.
 
 A *record* is an :class:`xarray.Dataset` with one dimension, ``time``, and
-these conventions (SI units throughout, see ``../shared/SPEC.md`` "Data"):
+these conventions (SI units throughout, see ``docs/CONTRACT.md`` "Data"):
 
 * coordinate ``time`` [s], uniformly sampled, first sample = start of the test;
 * data variables, float64 on ``time``, each with an ``attrs["units"]``:
@@ -70,19 +70,34 @@ def kind_of(columns) -> str:
 
 @dataclass(frozen=True)
 class Where:
-    """Where a problem is: used to build one-line error messages."""
+    """Where a problem is: used to build one-line error messages.
+
+    Attributes
+    ----------
+    source : str
+        File name or generator.
+    column : str, optional
+        Column (channel) name.
+    row : int, optional
+        Position: a file line (CSV, header = line 1) or a sample index (netCDF).
+    label : str
+        Word the message puts before ``row``: ``"line"`` or ``"sample"``.
+    """
 
     source: str
     column: str | None = None
     row: int | None = None
+    label: str = "line"
 
     def error(self, problem: str, remedy: str) -> RecordError:
+        """A :class:`RecordError` ``"source, column 'c', line n: problem — remedy"`` on one line."""
         parts = [self.source]
         if self.column is not None:
             parts.append(f"column '{self.column}'")
         if self.row is not None:
-            parts.append(f"row {self.row}")
-        return RecordError(f"{', '.join(parts)}: {problem} — {remedy}")
+            parts.append(f"{self.label} {self.row}")
+        msg = f"{', '.join(parts)}: {problem} — {remedy}"
+        return RecordError(" ".join(msg.split()))  # always one line
 
 
 def make_record(

@@ -238,9 +238,9 @@ def _causes(rounds: list[list[Candidate]], selected: list[Candidate]) -> list[di
 def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> dict:
     """Errors of the baseline and the extended model, as fitted, on another record."""
     if not isinstance(validate, xr.Dataset):
-        from ..data import read_record
+        from ..data import load
 
-        validate = read_record(validate, mass=record.attrs.get("mass"))
+        validate = load(validate, mass=record.attrs.get("mass"))
     if validate.attrs["kind"] != record.attrs["kind"]:
         raise ValueError(f"validation record is a {validate.attrs['kind']} test, the record a "
                          f"{record.attrs['kind']} test")

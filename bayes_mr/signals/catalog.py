@@ -14,7 +14,7 @@ from functools import partial
 
 import numpy as np
 
-from ..noise import as_generator
+from ..synthetic_noise import as_generator
 from .earthquake import BASELINES, earthquake
 from .signal import Signal
 from .thesis import amp_sweep, blwn, freq_sweep_up, freq_sweep_up_down, step

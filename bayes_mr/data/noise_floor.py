@@ -1,24 +1,22 @@
-"""Noise floor of a record and trimming to its excited part (thesis practice).
+"""Noise floor of a record: the measurement-noise SD of each channel (thesis practice).
 
 The thesis took its noise covariances from a separate 60-s "no input" run
-(NoInput-Hydraulic: the standard deviation of each channel) and trimmed every
-record to the part where the shake table moved. :func:`noise_floor` does the
-first from a no-input record if one is given, else from a quiet segment of
-the record itself (found automatically), else from a differencing estimate;
-:func:`trim_excited` does the second with a report of what was cut.
+(NoInput-Hydraulic: the standard deviation of each channel). :func:`noise_floor`
+does this from a no-input record if one is given, else from a quiet segment of
+the record itself (found automatically), else from a differencing estimate.
+Both the record and the no-input record are record Datasets (read them with
+:func:`bayes_mr.data.load`). This module *estimates* noise; synthetic noise
+for simulations is *generated* by :mod:`bayes_mr.synthetic_noise`.
 """
 
 from __future__ import annotations
-
-import os
 
 import numpy as np
 import xarray as xr
 from scipy import ndimage
 
-from .schema import MIN_SAMPLES, STRUCTURE
-
-_MAD = 1.4826
+from ..stats import robust_sd
+from .schema import STRUCTURE
 
 #: Window of the moving standard deviation that finds quiet and excited parts [s].
 WINDOW_S = 0.25
@@ -55,8 +53,29 @@ def moving_sd(x: np.ndarray, window: int) -> np.ndarray:
     return np.sqrt(np.maximum(m2 - m1 * m1, 0.0))
 
 
+def input_activity(ds: xr.Dataset, window_s: float = WINDOW_S) -> tuple[np.ndarray, int]:
+    """Moving SD of a record's input channel and its window length.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The record (attribute ``dt`` [s]).
+    window_s : float
+        Window length [s]; at least 8 samples are used.
+
+    Returns
+    -------
+    sd : ndarray, shape (n,)
+        Moving standard deviation of :func:`input_channel` (its units).
+    window : int
+        Window length [samples].
+    """
+    w = max(8, int(round(window_s / float(ds.attrs["dt"]))))
+    return moving_sd(ds[input_channel(ds)].values, w), w
+
+
 def differencing_sd(x: np.ndarray) -> float:
-    """White-noise SD from the third difference: 1.4826 · MAD(Δ³x) / √20.
+    """White-noise SD from the third difference: robust_sd(Δ³x) = 1.4826 · MAD(Δ³x), over √20.
 
     For white noise of SD σ the third difference has SD σ√20; the MAD makes
     the estimate ignore the few large differences at sharp features. This
@@ -66,7 +85,7 @@ def differencing_sd(x: np.ndarray) -> float:
     (A signal that is not oversampled leaks into Δ³ and biases it upwards.)
     """
     d3 = np.diff(np.asarray(x, float), 3)
-    return float(_MAD * np.median(np.abs(d3 - np.median(d3))) / np.sqrt(20.0))
+    return float(robust_sd(d3) / np.sqrt(20.0))
 
 
 def block_sd(x: np.ndarray, block: int) -> float:
@@ -110,11 +129,9 @@ def find_quiet(
     slice or None
         Sample slice of the quiet segment.
     """
-    x = ds[input_channel(ds)].values
-    n = x.size
+    sd, w = input_activity(ds, window_s)
+    n = sd.size
     dt = float(ds.attrs["dt"])
-    w = max(8, int(round(window_s / dt)))
-    sd = moving_sd(x, w)
     s_min = float(sd.min())
     if not sd.max() >= contrast * s_min or sd.max() == 0:
         return None
@@ -136,7 +153,7 @@ def noise_floor(
     ds: xr.Dataset,
     channels: list[str] | tuple[str, ...] | None = None,
     quiet: slice | tuple[float, float] | bool | None = None,
-    noise_record: xr.Dataset | str | os.PathLike | None = None,
+    noise_record: xr.Dataset | None = None,
 ) -> NoiseFloor:
     """Measurement-noise standard deviation of each channel.
 
@@ -159,8 +176,10 @@ def noise_floor(
     channels : sequence of str, optional
         Default: every data channel.
     quiet : slice, (float, float), bool or None
-    noise_record : xarray.Dataset or path, optional
-        A record of the same rig with no input.
+    noise_record : xarray.Dataset, optional
+        A record of the same rig with no input (from a file:
+        ``load(path, quality=False, velocity=None)``, or ``load(record_path,
+        noise_record=path)`` which does that for you).
 
     Returns
     -------
@@ -175,12 +194,6 @@ def noise_floor(
     block = max(8, int(round(WINDOW_S / dt)))
     out = NoiseFloor()
     if noise_record is not None:
-        if not isinstance(noise_record, xr.Dataset):
-            from .io import read_record  # io imports this module
-
-            noise_record = read_record(
-                noise_record, mass=ds.attrs.get("mass", 1.0), quality=False, velocity=None
-            )
         nv = noise_record["valid"].values.astype(bool) if "valid" in noise_record else None
         nblock = max(8, int(round(WINDOW_S / float(noise_record.attrs["dt"]))))
         for name in names:
@@ -212,102 +225,3 @@ def noise_floor(
             out[name] = differencing_sd(ds[name].values[valid])
             out.methods[name] = "differencing"
     return out
-
-
-def trim_excited(
-    ds: xr.Dataset,
-    threshold: float = 5.0,
-    *,
-    fraction: float = 0.02,
-    contrast: float = 20.0,
-    window_s: float = WINDOW_S,
-) -> tuple[xr.Dataset, dict]:
-    """Trim a record to the part where its input moves (thesis practice).
-
-    The input channel's moving SD (window ``window_s``) is compared with its
-    quiet level q = the smallest moving SD in the record; the excited part
-    runs from the first to the last sample whose moving SD exceeds
-    max(``threshold`` · q, ``fraction`` · largest moving SD) — the second
-    term ignores a twitch of the rig at rest — widened by one window on each
-    side so that the onset and the decay are kept. A record that is never
-    quiet (largest moving SD < ``contrast`` · q: then q is motion, not rest) is
-    not trimmed. The trimmed record's time
-    starts again at 0 (every simulation starts from rest at the first sample);
-    its attribute ``trim_offset_s`` holds the original time of its first
-    sample. Sample indices in an earlier quality report (attribute
-    ``quality``) still count from the untrimmed start (``start_index``).
-
-    Parameters
-    ----------
-    ds : xarray.Dataset
-    threshold : float
-        Multiple of the quiet level that counts as excited.
-    fraction : float
-        Fraction of the largest moving SD that counts as excited at least.
-    contrast : float
-        Smallest ratio of the largest to the smallest moving SD for a record
-        to have a quiet part at all.
-    window_s : float
-        Moving-window length [s].
-
-    Returns
-    -------
-    record : xarray.Dataset
-    report : dict
-        ``trimmed``, ``channel``, ``start_index``, ``stop_index`` (exclusive),
-        ``cut_start_s``, ``cut_end_s``, ``quiet_level``, ``threshold``, ``reason``.
-    """
-    name = input_channel(ds)
-    x = ds[name].values
-    n = x.size
-    dt = float(ds.attrs["dt"])
-    w = max(8, int(round(window_s / dt)))
-    sd = moving_sd(x, w)
-    q = float(sd.min())
-    level = max(threshold * q, fraction * float(sd.max()))
-    report = {
-        "trimmed": False,
-        "channel": name,
-        "start_index": 0,
-        "stop_index": n,
-        "cut_start_s": 0.0,
-        "cut_end_s": 0.0,
-        "quiet_level": q,
-        "threshold": level,
-        "window_s": window_s,
-    }
-    excited = sd > level
-    if sd.max() < contrast * q or excited.all():
-        report["reason"] = (
-            f"no quiet part: the input's moving SD varies only {sd.max() / max(q, 1e-300):.3g}-fold "
-            f"(< {contrast:g}) or never falls below the threshold"
-        )
-        return ds, report
-    idx = np.flatnonzero(excited)
-    a = max(int(idx[0]) - w, 0)
-    b = min(int(idx[-1]) + w + 1, n)
-    if b - a < MIN_SAMPLES:
-        report["reason"] = f"excited part has {b - a} samples < {MIN_SAMPLES}: not trimmed"
-        return ds, report
-    if a == 0 and b == n:
-        report["reason"] = "excited from start to end: nothing to cut"
-        return ds, report
-    t = ds["time"].values
-    out = ds.isel(time=slice(a, b)).copy(deep=True)
-    out = out.assign_coords(time=("time", t[a:b] - t[a], dict(ds["time"].attrs)))
-    out.attrs["trim_offset_s"] = float(ds.attrs.get("trim_offset_s", 0.0)) + float(t[a])
-    if "valid" in out:
-        out.attrs["masked"] = int((~out["valid"].values.astype(bool)).sum())
-    report.update(
-        trimmed=True,
-        start_index=a,
-        stop_index=b,
-        cut_start_s=float(a * dt),
-        cut_end_s=float((n - b) * dt),
-        reason=(
-            f"kept {t[a]:.3f}–{t[b - 1]:.3f} s where the moving SD of {name} exceeds "
-            f"{level:.3g} (max of {threshold:g} × its quiet level {q:.3g} and {fraction:g} × its peak), "
-            f"plus one {window_s:g}-s window each side"
-        ),
-    )
-    return out, report

@@ -1,0 +1,115 @@
+"""Read a record file (CSV, CSV.gz, netCDF) into the package schema: the first step of :func:`bayes_mr.data.load`.
+
+:func:`read_file` validates the file (every problem is a one-line
+:class:`~bayes_mr.data.schema.RecordError` naming the file, the column and the
+line, and what to do), converts units to SI (:mod:`bayes_mr.data.units`),
+checks the time grid and the storey mass, and warns when a magnitude looks
+like a wrong unit. It derives nothing and assesses nothing: those are the
+later steps of :func:`bayes_mr.data.load`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from . import units as _units
+from .checks import CSV_SUFFIXES, NC_SUFFIXES, check_time, file_suffix
+from .read_csv import read_csv
+from .read_netcdf import read_netcdf
+from .schema import DEVICE, STRUCTURE, Where, kind_of, make_record
+
+
+def read_file(
+    path: str | os.PathLike,
+    *,
+    mass: float | None = None,
+    units: Mapping[str, str] | Iterable[str] | None = None,
+) -> xr.Dataset:
+    """Read a test record from CSV (plain or gzip) or netCDF, in SI units.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``*.csv``, ``*.csv.gz`` (header row, comma separated; a trailing comma
+        on every line is tolerated) or ``*.nc`` written by
+        :func:`bayes_mr.data.write_record`. Column headers are schema names,
+        optionally with a unit in brackets (``displacement [mm]``).
+    mass : float, optional
+        Storey mass [kg]; overrides a netCDF ``mass`` attribute. Required for
+        structure tests if the file carries none.
+    units : mapping or iterable of "column=unit", optional
+        Units of columns whose header carries none (``{"displacement": "cm"}``
+        or ``["displacement=cm"]``). A header unit that disagrees is an error.
+
+    Returns
+    -------
+    xarray.Dataset
+        Record with the file's channels and ``valid`` (a netCDF's mask, else
+        all True); attributes ``kind``, ``fs`` [Hz], ``dt`` [s], ``source``,
+        ``masked``, ``mass`` [kg] where given, ``time_rebuilt`` where the
+        stamps were rounded, and a netCDF's other attributes.
+
+    Raises
+    ------
+    RecordError
+        One line naming file, column and line (CSV; header = line 1) or sample
+        (netCDF), and the remedy.
+
+    Warns
+    -----
+    UnitWarning
+        A channel's magnitude looks like a wrong unit.
+    """
+    path = Path(path)
+    src = str(path)
+    if not path.exists():
+        raise Where(src).error("file not found", "check the path")
+    if path.is_dir():
+        raise Where(src).error("is a directory, not a record", "give a .csv, .csv.gz or .nc file")
+    suffix = file_suffix(path)
+    overrides = _units.parse_unit_options(units)
+    if suffix in CSV_SUFFIXES:
+        time, channels, attrs, valid = read_csv(path, src, overrides)
+        label = "line"
+    elif suffix in NC_SUFFIXES:
+        time, channels, attrs, valid = read_netcdf(path, src, overrides)
+        label = "sample"
+    else:
+        raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz or .nc")
+
+    kind = kind_of(channels)
+    time, rebuilt = check_time(time, src, label)
+    if rebuilt:
+        attrs["time_rebuilt"] = "time stamps rounded in the file; rebuilt as t0 + i*dt"
+    dt = (time[-1] - time[0]) / (time.size - 1)
+    _units.check_plausible(channels, src, fs=1.0 / dt)
+
+    m = _storey_mass(attrs, mass, kind, src)
+    channel_attrs = attrs.pop("_channel_attrs", {})
+    ds = make_record(time, channels, kind=kind, mass=m if kind == STRUCTURE else None, source=src, valid=valid)
+    for name, a in channel_attrs.items():
+        if name in ds:
+            ds[name].attrs.update(a)
+    if kind == DEVICE and m is not None:
+        ds.attrs["mass"] = float(m)
+    for key, value in attrs.items():
+        ds.attrs.setdefault(key, value)
+    ds.attrs["masked"] = int((~ds["valid"].values).sum())
+    return ds
+
+
+def _storey_mass(attrs: dict, mass: float | None, kind: str, src: str) -> float | None:
+    """The mass [kg] to record (the argument over the file's), taken out of ``attrs``; required for a structure."""
+    if mass is not None:
+        attrs["mass"] = float(mass)
+    m = attrs.pop("mass", None)
+    if kind == STRUCTURE and (m is None or not np.isfinite(m) or m <= 0):
+        raise Where(src).error(
+            "a structure test needs the storey mass", "pass --mass KG (or a netCDF 'mass' attribute)"
+        )
+    return m
