@@ -240,30 +240,3 @@ def run_bench(seed: int = 0, progress=print) -> dict:
     progress("diagnose on a 30 s record at 1 kHz …")
     out.update(diagnose_timing(seed=seed))
     return out
-
-
-def bench_markdown(r: dict) -> str:
-    """The README table of a benchmark run."""
-    rel = r.get("train_best_rel_error", {})
-    worst = max(rel.values()) if rel else float("nan")
-    rows = [
-        ("UKF, ours (100 priors at once, all cores), per run and sample", f"{r['ukf_us_per_step']:.2f} µs"),
-        ("UKF, ours (one run, one thread), per sample", f"{r['ukf_us_per_step_single']:.2f} µs"),
-        ("filterpy UnscentedKalmanFilter, model in Python, per sample", f"{r['filterpy_us_per_step']:.0f} µs"),
-        ("filterpy with our compiled model step, per sample", f"{r['filterpy_compiled_fx_us_per_step']:.0f} µs"),
-        ("speedup (as used / like for like)", f"{r['speedup']:.0f}× / {r['speedup_single']:.0f}×"),
-        ("largest state difference from filterpy", f"{r['max_state_diff']:.1e} standard deviations"),
-        (f"100-prior training, dahl, thesis signal I ({r['train_samples']} samples)", f"{r['train_100_priors_s']:.1f} s"),
-        ("trained fraction (thesis: 32–42 %)", f"{100 * r['trained_fraction']:.0f} %"),
-        ("best trained run, largest parameter error", f"{100 * worst:.2f} %"),
-        (f"least squares, {r['mcmc_record']}", f"{r['lsq_s']:.1f} s"),
-        (f"emcee posterior, {r['mcmc_record']}: {r['mcmc_steps']} steps × {r['mcmc_walkers']} walkers, "
-         f"τ_max {r['mcmc_tau_max']:.0f}, R-hat_max {r['mcmc_rhat_max']:.3f}"
-         f"{'' if r['mcmc_converged'] else ' (NOT converged)'}", f"{r['mcmc_s']:.0f} s"),
-        (f"diagnose, {r['diagnose_record']}: cause named {r['diagnose_cause']}, MSE ratio "
-         f"{r['diagnose_mse_ratio']:.3f}", f"{r['diagnose_s']:.0f} s"),
-    ]
-    lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
-    lines.append("")
-    lines.append(f"UKF model: {r['ukf_model']}; {r['threads']} threads. Written by `bayes-mr bench`.")
-    return "\n".join(lines)
