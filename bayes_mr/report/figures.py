@@ -42,7 +42,7 @@ def save(fig: Figure, path: str | Path, dpi: int = 110, metadata: dict | None = 
 
 
 def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "", xlabel: str = "displacement [mm]",
-               window: slice | None = None, scale_x: float = 1e3):
+               window: slice | None = None, scale_x: float = 1e3) -> Figure:
     """Force–displacement loops: each entry of ``curves`` is a force series [N]."""
     fig, ax = subplots(figsize=(5.5, 4.2))
     sl = slice(None) if window is None else window
@@ -58,7 +58,7 @@ def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "",
 
 
 def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, title: str = "",
-                window: tuple[float, float] | None = None):
+                window: tuple[float, float] | None = None) -> Figure:
     """Stacked panels of time series: ``panels[ylabel][label] = values``."""
     fig, axes = subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
     t = np.asarray(t)
@@ -76,7 +76,7 @@ def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, titl
 
 
 def convergence(t: np.ndarray, history: dict[str, np.ndarray], truth: dict[str, float] | None = None,
-                sd: dict[str, np.ndarray] | None = None, *, title: str = ""):
+                sd: dict[str, np.ndarray] | None = None, *, title: str = "") -> Figure:
     """Parameter convergence histories (thesis Fig. 3.8, 3.47, 5.24)."""
     names = list(history)
     fig, axes = subplots(len(names), 1, figsize=(7, 1.6 * len(names)), sharex=True, squeeze=False)
@@ -95,7 +95,7 @@ def convergence(t: np.ndarray, history: dict[str, np.ndarray], truth: dict[str, 
     return fig
 
 
-def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None = None, *, title: str = ""):
+def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None = None, *, title: str = "") -> Figure:
     """Histograms of trained models' parameters (thesis Fig. 3.27, 5.3–5.5)."""
     names = list(values)
     cols = min(3, len(names))
@@ -120,7 +120,7 @@ def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None 
     return fig
 
 
-def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: int = 30):
+def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: int = 30) -> Figure:
     """Residual ``r`` against several variables: binned mean ± SD (diagnose views)."""
     fig, axes = subplots(1, len(xs), figsize=(3.2 * len(xs), 2.8), squeeze=False)
     r = np.asarray(r, float)
