@@ -12,8 +12,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# the commands write only under results/; the script then writes README.md's measured sections from their JSON
 run: $(STAMP)
 	$(BIN)/bayes-mr run --out results
+	$(BIN)/python scripts/update_readme.py run --out results
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
@@ -23,6 +25,7 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/bayes-mr bench --json results/bench.json
+	$(BIN)/python scripts/update_readme.py bench --json results/bench.json
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -16,6 +16,10 @@
   ``trained_fraction`` is the share of runs that completed.
 * **MCMC and least squares** — ``dahl`` (4 parameters + 2 noise SDs) on a
   25 s band-limited structure test at 1 kHz (emcee until 50 τ).
+
+:func:`run_bench` returns every number; ``bayes-mr bench --json F`` writes
+them to ``F`` and nothing else (``scripts/update_readme.py`` builds the
+README's bench section from that file, :func:`bayes_mr.report.readme.bench_section`).
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ def _python_rhs(form: str, mass: float):
     """The model's right-hand side written as a filterpy user would: plain Python.
 
     Returns ``rhs(s, theta, ag) -> (ṡ, f_r)`` for a structure test of the
-    normalized Bouc–Wen or Dahl form (SPEC equations).
+    normalized Bouc–Wen or Dahl form (the equations of docs/CONTRACT.md).
     """
     def sgn(v):
         return math.copysign(1.0, v) if v != 0.0 else 0.0
@@ -73,24 +77,10 @@ def _python_rhs(form: str, mass: float):
     return rhs
 
 
-def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 1500, seed: int = 0) -> dict:
-    """Per-step time of our UKF and of filterpy's on the same problem.
-
-    Both filters start from the same prior with the same sigma points, Q and
-    R. filterpy runs twice: with the model's right-hand side and RK4 in plain
-    Python (what a filterpy user writes — the reference for ``speedup``) and
-    with our compiled model step as ``fx``/``hx`` (its own overhead alone).
-    """
+def _time_ours_single(problem, prior, settings) -> tuple[dict, float]:
+    """Our filter, one run on one thread: its output and its time per sample [µs] (compiled outside the timing)."""
     import numba
-    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-    rec = _signal_I_record(model, seed)
-    m = get_model(model)
-    settings = ukf.UKFSettings()
-    problem = ukf.make_problem(OutputError(m, rec), settings=settings)
-    truth = m.theta("structure", {})
-    prior = ukf.Prior(problem.coords.to_phi(truth) + 0.1, np.full(len(problem.coords.names), 0.2))
-    ns = len(problem.p0_states)
     ukf.filter_states(problem, prior, settings)  # compile
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
@@ -100,10 +90,15 @@ def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 
         ours_s = _time.perf_counter() - t0
     finally:
         numba.set_num_threads(threads)
-    ours_us = ours_s / (problem.inputs.n - 1) * 1e6
+    return ours, ours_s / (problem.inputs.n - 1) * 1e6
 
+
+def _filterpy_models(model: str, rec, problem) -> dict[str, tuple]:
+    """``fx``/``hx`` pairs for filterpy: the model in plain Python (RK4) and our compiled model step."""
+    m = get_model(model)
+    ns = len(problem.p0_states)
     lay, cst = m.layout("structure"), m.constants(rec.attrs["mass"])
-    coords, rows, y, h = problem.coords, problem.inputs.rows, problem.yobs, problem.inputs.dt
+    coords = problem.coords
     rhs = _python_rhs(model, float(rec.attrs["mass"]))
 
     def fx_python(x, dt, t, a0, a1):
@@ -126,42 +121,79 @@ def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 
     def hx_compiled(x, t, a):
         return K.measure(lay, cst, coords.to_theta(x[ns:]), t, a, x[:ns].copy(), 2)
 
-    L = ns + len(coords.names)
-    n = min(n_filterpy_steps, problem.inputs.n - 1)
-    out = {}
-    for label, fx, hx in (("python", fx_python, hx_python), ("compiled", fx_compiled, hx_compiled)):
-        pts = MerweScaledSigmaPoints(L, alpha=settings.points.alpha, beta=settings.points.beta,
-                                     kappa=settings.points.kappa)
-        f = UnscentedKalmanFilter(dim_x=L, dim_z=2, dt=h, hx=hx, fx=fx, points=pts)
-        m0, P0, Q = ukf._initial(problem, prior, settings)
-        f.x, f.P, f.Q, f.R = m0.copy(), P0.copy(), Q, problem.R
-        diff = 0.0
-        t0 = _time.perf_counter()
-        for k in range(n):
-            f.predict(t=k * h, a0=rows[k], a1=rows[k + 1])
-            f.update(y[k + 1], t=(k + 1) * h, a=rows[k + 1])
-            if label == "python":  # outside the timed region would need a second pass; it is cheap
-                d = np.abs(ours["states"][k + 1] - f.x) / np.sqrt(np.diag(f.P))
-                diff = max(diff, float(d.max()))
-        out[label] = (_time.perf_counter() - t0) / n * 1e6
-        if label == "python":
-            out["diff"] = diff
-    # the engine as used: 100 priors filtered at once on all cores (first 10 s of signal I)
+    return {"python": (fx_python, hx_python), "compiled": (fx_compiled, hx_compiled)}
+
+
+def _time_filterpy(problem, prior, settings, fx, hx, n: int, ours_states: np.ndarray | None) -> tuple[float, float]:
+    """filterpy's UnscentedKalmanFilter over ``n`` steps: time per step [µs] and, given our states, the
+    largest |ours − filterpy| in filterpy's standard deviations (0 without them)."""
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    L = len(problem.p0_states) + len(problem.coords.names)
+    rows, y, h = problem.inputs.rows, problem.yobs, problem.inputs.dt
+    pts = MerweScaledSigmaPoints(L, alpha=settings.points.alpha, beta=settings.points.beta,
+                                 kappa=settings.points.kappa)
+    f = UnscentedKalmanFilter(dim_x=L, dim_z=2, dt=h, hx=hx, fx=fx, points=pts)
+    m0, P0, Q = ukf._initial(problem, prior, settings)
+    f.x, f.P, f.Q, f.R = m0.copy(), P0.copy(), Q, problem.R
+    diff = 0.0
+    t0 = _time.perf_counter()
+    for k in range(n):
+        f.predict(t=k * h, a0=rows[k], a1=rows[k + 1])
+        f.update(y[k + 1], t=(k + 1) * h, a=rows[k + 1])
+        if ours_states is not None:  # outside the timed region would need a second pass; it is cheap
+            d = np.abs(ours_states[k + 1] - f.x) / np.sqrt(np.diag(f.P))
+            diff = max(diff, float(d.max()))
+    return (_time.perf_counter() - t0) / n * 1e6, diff
+
+
+def _batched_us(problem, settings, seed: int) -> float:
+    """The engine as used: 100 priors filtered at once on all cores (first 10 s of signal I), µs per run and sample."""
     short = problem.__class__(**{**problem.__dict__, "inputs": problem.inputs.slice(0, 40960),
                                  "yobs": problem.yobs[:40960], "valid": problem.valid[:40960]})
     priors = ukf.lhs_priors(problem.coords, seed=seed)
     ukf.run_priors(short, priors[:2], settings)
     batch = ukf.run_priors(short, priors, settings)
-    batched_us = batch["wall_s"] / (len(priors) * (short.inputs.n - 1)) * 1e6
+    return batch["wall_s"] / (len(priors) * (short.inputs.n - 1)) * 1e6
+
+
+def ukf_vs_filterpy(model: str = "normalized-bouc-wen", n_filterpy_steps: int = 1500, seed: int = 0) -> dict:
+    """Per-step time of our UKF and of filterpy's on the same problem.
+
+    Both filters start from the same prior with the same sigma points, Q and
+    R. filterpy runs twice: with the model's right-hand side and RK4 in plain
+    Python (what a filterpy user writes — the reference for ``speedup``) and
+    with our compiled model step as ``fx``/``hx`` (its own overhead alone).
+
+    Returns
+    -------
+    dict
+        The UKF keys of ``bench`` in docs/CONTRACT.md (times in µs per sample) and a few more.
+    """
+    import numba
+
+    rec = _signal_I_record(model, seed)
+    m = get_model(model)
+    settings = ukf.UKFSettings()
+    problem = ukf.make_problem(OutputError(m, rec), settings=settings)
+    truth = m.theta("structure", {})
+    prior = ukf.Prior(problem.coords.to_phi(truth) + 0.1, np.full(len(problem.coords.names), 0.2))
+    ours, ours_us = _time_ours_single(problem, prior, settings)
+    n = min(n_filterpy_steps, problem.inputs.n - 1)
+    models = _filterpy_models(model, rec, problem)
+    python_us, diff = _time_filterpy(problem, prior, settings, *models["python"], n, ours["states"])
+    compiled_us, _ = _time_filterpy(problem, prior, settings, *models["compiled"], n, None)
+    batched_us = _batched_us(problem, settings, seed)
+    L = len(problem.p0_states) + len(problem.coords.names)
     return {
         "ukf_model": f"{model} (structure test, {L} augmented states, thesis signal I)",
         "ukf_us_per_step": batched_us,
         "ukf_us_per_step_single": ours_us,
-        "filterpy_us_per_step": out["python"],
-        "filterpy_compiled_fx_us_per_step": out["compiled"],
-        "speedup": out["python"] / batched_us,
-        "speedup_single": out["python"] / ours_us,
-        "max_state_diff": out["diff"],
+        "filterpy_us_per_step": python_us,
+        "filterpy_compiled_fx_us_per_step": compiled_us,
+        "speedup": python_us / batched_us,
+        "speedup_single": python_us / ours_us,
+        "max_state_diff": diff,
         "filterpy_steps_compared": n,
         "threads": numba.get_num_threads(),
     }
@@ -229,7 +261,7 @@ def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, o
 
 
 def run_bench(seed: int = 0, progress=print) -> dict:
-    """All benchmark figures (SPEC ``bench`` keys and a few more)."""
+    """All benchmark figures (the ``bench`` keys of docs/CONTRACT.md and a few more)."""
     out = {}
     progress("UKF per step, ours vs filterpy …")
     out.update(ukf_vs_filterpy(seed=seed))
@@ -240,30 +272,3 @@ def run_bench(seed: int = 0, progress=print) -> dict:
     progress("diagnose on a 30 s record at 1 kHz …")
     out.update(diagnose_timing(seed=seed))
     return out
-
-
-def bench_markdown(r: dict) -> str:
-    """The README table of a benchmark run."""
-    rel = r.get("train_best_rel_error", {})
-    worst = max(rel.values()) if rel else float("nan")
-    rows = [
-        ("UKF, ours (100 priors at once, all cores), per run and sample", f"{r['ukf_us_per_step']:.2f} µs"),
-        ("UKF, ours (one run, one thread), per sample", f"{r['ukf_us_per_step_single']:.2f} µs"),
-        ("filterpy UnscentedKalmanFilter, model in Python, per sample", f"{r['filterpy_us_per_step']:.0f} µs"),
-        ("filterpy with our compiled model step, per sample", f"{r['filterpy_compiled_fx_us_per_step']:.0f} µs"),
-        ("speedup (as used / like for like)", f"{r['speedup']:.0f}× / {r['speedup_single']:.0f}×"),
-        ("largest state difference from filterpy", f"{r['max_state_diff']:.1e} standard deviations"),
-        (f"100-prior training, dahl, thesis signal I ({r['train_samples']} samples)", f"{r['train_100_priors_s']:.1f} s"),
-        ("trained fraction (thesis: 32–42 %)", f"{100 * r['trained_fraction']:.0f} %"),
-        ("best trained run, largest parameter error", f"{100 * worst:.2f} %"),
-        (f"least squares, {r['mcmc_record']}", f"{r['lsq_s']:.1f} s"),
-        (f"emcee posterior, {r['mcmc_record']}: {r['mcmc_steps']} steps × {r['mcmc_walkers']} walkers, "
-         f"τ_max {r['mcmc_tau_max']:.0f}, R-hat_max {r['mcmc_rhat_max']:.3f}"
-         f"{'' if r['mcmc_converged'] else ' (NOT converged)'}", f"{r['mcmc_s']:.0f} s"),
-        (f"diagnose, {r['diagnose_record']}: cause named {r['diagnose_cause']}, MSE ratio "
-         f"{r['diagnose_mse_ratio']:.3f}", f"{r['diagnose_s']:.0f} s"),
-    ]
-    lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
-    lines.append("")
-    lines.append(f"UKF model: {r['ukf_model']}; {r['threads']} threads. Written by `bayes-mr bench`.")
-    return "\n".join(lines)

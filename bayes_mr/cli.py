@@ -1,4 +1,4 @@
-"""The ``bayes-mr`` command (verbs and flags fixed by ``../shared/SPEC.md``).
+"""The ``bayes-mr`` command (verbs and flags fixed by ``docs/CONTRACT.md``).
 
 Bad input ends with one line on stderr naming file, column, row and what to
 do, exit status 2, and nothing written. Ctrl-C ends with status 130.
@@ -155,7 +155,7 @@ def cmd_validate(args) -> int:
 def cmd_compare(args) -> int:
     from .compare import compare, table
     from .identify import UKF
-    from .report import markdown_table
+    from .report.markdown import markdown_table
 
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None
@@ -189,7 +189,7 @@ def cmd_diagnose(args) -> int:
 def cmd_run(args) -> int:
     from .mainjob import run
 
-    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, readme=not args.no_readme)
+    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet)
     print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)
     if args.json:
         _write_json(summary, args.json)
@@ -226,14 +226,11 @@ def cmd_study(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import bench_markdown, run_bench
-    from .readme import project_readme, update_section
+    from .bench import run_bench
 
     say = progress_say(on_terminal(True))
     result = run_bench(seed=args.seed, progress=say)
     _write_json(result, args.json)
-    if not args.no_readme and update_section(project_readme(), "bench", bench_markdown(result)):
-        print(f"updated the Performance section of {project_readme()}", file=sys.stderr)
     return 0
 
 
@@ -258,18 +255,24 @@ def _common_data_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from .models import EFFECTS, FORMS
+def _job_flags(p: argparse.ArgumentParser, *, out: str | None, json: tuple[str, str]) -> None:
+    """The flags the fitting verbs end with: seed, output folder (help ``out``; None: none), ``--json``
+    (metavar, help), quiet, and the record's data flags."""
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    if out:
+        p.add_argument("--out", metavar="DIR", help=out)
+    p.add_argument("--json", metavar=json[0], help=json[1])
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    _common_data_flags(p)
 
-    forms = ", ".join(FORMS)
-    effects = ", ".join(EFFECTS)
-    parser = argparse.ArgumentParser(
-        prog="bayes-mr",
-        description="Bayesian identification, model selection and diagnosis of MR dampers "
-                    "(UKF, emcee and least squares on one likelihood).",
-    )
-    sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
 
+def _no_readme_flag(p: argparse.ArgumentParser) -> None:
+    # kept so scripts and Makefiles written for earlier versions still run: the command never writes README.md
+    p.add_argument("--no-readme", action="store_true",
+                   help="accepted and ignored: README.md is written by scripts/update_readme.py, not by this command")
+
+
+def _simulate_parser(sub, forms: str, effects: str) -> None:
     p = sub.add_parser("simulate", help="simulate a test record of a model (with noise)",
                        description=f"Simulate a structure or device test. Forms: {forms}. Effects: {effects}.")
     p.add_argument("--model", required=True, help="FORM[+EFFECT...], e.g. dahl or dahl+force_offset")
@@ -296,9 +299,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (noise and random signals)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output record (.csv, .csv.gz or .nc)")
 
+
+def _fit_parsers(sub, forms: str) -> None:
     p = sub.add_parser("fit", help="fit one model with one estimator",
-                       description="Fit a model to a record. Writes the SPEC's fit JSON and, with -o, the "
-                                   "full result (ArviZ InferenceData, netCDF).")
+                       description="Fit a model to a record. Writes the fit JSON (docs/CONTRACT.md) and, with -o, "
+                                   "the full result (ArviZ InferenceData, netCDF).")
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--model", required=True, help=f"FORM[+EFFECT...]; forms: {forms}")
     p.add_argument("--engine", choices=("ukf", "mcmc", "lsq"), default="lsq", help="estimator (default lsq)")
@@ -306,11 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="(ukf) choose the trained run by its MSE on this other record (thesis method 2)")
     p.add_argument("--prior", action="append", metavar="NAME=LO:HI", help="plausible range of a parameter [SI]")
     p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="hold a parameter fixed [SI]")
-    p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("-o", "--output", metavar="RESULT.nc", help="write the full result")
-    p.add_argument("--json", metavar="SUMMARY.json", help="write the summary here (default: stdout)")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    _common_data_flags(p)
+    _job_flags(p, out=None, json=("SUMMARY.json", "write the summary here (default: stdout)"))
 
     p = sub.add_parser("validate", help="predict another record with a fitted model (thesis method 2)",
                        description="Simulate the fitted point estimate on another record and score it; "
@@ -320,6 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
     _common_data_flags(p)
 
+
+def _compare_parsers(sub, forms: str, effects: str) -> None:
     p = sub.add_parser("compare", help="fit several models with several engines and compare them",
                        description="Models × engines on one record: parameters with uncertainty, MSE, force "
                                    "errors, log evidence and Bayes factors; the model is selected by evidence "
@@ -330,11 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
     p.add_argument("--ukf-lhs", type=int, metavar="N",
                    help="Latin-hypercube priors per index of dispersion for the UKF (default 10: 100 priors)")
-    p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--out", metavar="DIR", help="also write every fit as netCDF and the table as CSV here")
-    p.add_argument("--json", metavar="OUT.json", help="write the comparison here (default: stdout)")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    _common_data_flags(p)
+    _job_flags(p, out="also write every fit as netCDF and the table as CSV here",
+               json=("OUT.json", "write the comparison here (default: stdout)"))
 
     p = sub.add_parser("diagnose", help="what the model gets wrong, why, and what extending it gains",
                        description=f"Fit the baseline, look at its residuals, score every effect ({effects}) "
@@ -342,21 +343,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
-    p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--out", metavar="DIR", help="write the Markdown report and figures here")
-    p.add_argument("--json", metavar="REPORT.json", help="write the report here (default: stdout)")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    _common_data_flags(p)
+    _job_flags(p, out="write the Markdown report and figures here",
+               json=("REPORT.json", "write the report here (default: stdout)"))
 
+
+def _job_parsers(sub) -> None:
     p = sub.add_parser("run", help="the main job on the packaged measured MR damper record (make run)",
                        description="Every form × estimator on part A of the measured damper record, validated on "
                                    "part B; Spencer (1997)'s published parameters beside; diagnosis of the selected "
-                                   "model; the virtual shake table. Writes OUT/report.md, CSV tables, netCDF fits.")
+                                   "model; the virtual shake table. Writes OUT/report.md, OUT/summary.json, CSV "
+                                   "tables, netCDF fits and figures under OUT, nothing else.")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results)")
     p.add_argument("--quick", action="store_true", help="a minute-long pass on a short window")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--json", metavar="OUT.json", help="also write the summary here")
-    p.add_argument("--no-readme", action="store_true", help="do not update README.md's run section")
+    _no_readme_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
     p = sub.add_parser("study", help="run one study of studies/ (thesis reproductions and extensions)",
@@ -370,10 +371,29 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="the performance benchmark (UKF vs filterpy, training, MCMC, LSQ)",
                        description="Measure the UKF per step against filterpy on the same model and data, a "
                                    "100-prior training at the thesis's size, and MCMC/least-squares wall times; "
-                                   "writes the figures into README.md.")
+                                   "writes the figures to --json only (make bench then writes README.md's "
+                                   "section with scripts/update_readme.py).")
     p.add_argument("--json", metavar="OUT.json", help="write the figures here (default: stdout)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--no-readme", action="store_true", help="do not update README.md")
+    _no_readme_flag(p)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``bayes-mr`` argument parser: one sub-parser per verb (docs/CONTRACT.md)."""
+    from .models import EFFECTS, FORMS
+
+    forms = ", ".join(FORMS)
+    effects = ", ".join(EFFECTS)
+    parser = argparse.ArgumentParser(
+        prog="bayes-mr",
+        description="Bayesian identification, model selection and diagnosis of MR dampers "
+                    "(UKF, emcee and least squares on one likelihood).",
+    )
+    sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
+    _simulate_parser(sub, forms, effects)
+    _fit_parsers(sub, forms)
+    _compare_parsers(sub, forms, effects)
+    _job_parsers(sub)
     return parser
 
 

@@ -24,9 +24,11 @@ command voltage, measured force):
    displacement and acceleration only, and the damper force it implies is
    compared with the measured force.
 
-Everything is written to ``out_dir``: ``report.md`` with figures, tables as
-CSV, every fit as netCDF, ``summary.json``; and the README's run section
-(numbers computed in this run).
+Everything is written to ``out_dir``: ``report.md`` with figures
+(:mod:`bayes_mr.report.run`), tables as CSV, every fit as netCDF and
+``summary.json``, which holds every number the README's run section shows
+(``scripts/update_readme.py`` writes that section; this module never
+touches the README).
 """
 
 from __future__ import annotations
@@ -36,10 +38,9 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import xarray as xr
 
-from . import plots, results
+from . import results
 from .compare import compare, selection_route, table
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
@@ -51,7 +52,7 @@ from .inference.ukf import TAUS
 from .metrics import force_nrmse
 from .models import FORMS, get_model
 from .progress import say as progress_say
-from .report import fmt, markdown_table
+from .report.run import report_markdown, run_figures, spencer_table
 from .scores import score
 
 #: Where the published Spencer (1997) parameters come from (issue #6; a secondary source).
@@ -273,43 +274,26 @@ def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, ou
     return out
 
 
-def _figures(out_dir: Path, part_b, rows, fits, selected, spencer, vst) -> dict[str, str]:
-    """Force on B (measured, selected identified, published Spencer), loops, and the shake-table force."""
-    figs = {}
-    t = part_b["time"].values
-    x = part_b["displacement"].values
-    curves = {"measured": part_b["force"].values}
-    sel = next((r for r in rows if r["model"] == selected and r["engine"] == "lsq" and "error" not in r), None)
-    best = _best_by_validation(rows)
-    for label, r in ((f"{selected} (lsq, selected by evidence)", sel),
-                     (f"{best['model']} ({best['engine']}, best on B)" if best else "", best)):
-        if r is not None and label not in curves:
-            try:
-                curves[label] = predict(r["model"], part_b, r["params"])["force"]
-            except ValueError:
-                pass
-    try:
-        curves["Spencer 1997 published"] = predict("spencer", part_b, spencer["params"])["force"]
-    except ValueError:
-        pass
-    window = (0.0, min(4.0, float(t[-1])))
-    figs["force_b"] = str(plots.save(plots.time_series(t, {"force [N]": curves}, window=window,
-                                                       title="part B (never fitted): damper force"),
-                                     out_dir / "force_part_b.png"))
-    sl = slice(0, int(window[1] * float(part_b.attrs["fs"])))
-    figs["hysteresis_b"] = str(plots.save(plots.hysteresis(x, curves, window=sl, title="part B: force–displacement"),
-                                          out_dir / "hysteresis_part_b.png"))
-    if vst is not None and "_vst_b" in vst:
-        v = vst["_vst_b"]
-        panel = {"measured damper force": v["force"].values}
-        for label in ("ukf", "lsq"):
-            implied = vst.get(label, {}).get("_force_b")
-            if implied is not None:
-                panel[f"implied by {label} fit (from x and a only)"] = implied
-        figs["shake_table"] = str(plots.save(plots.time_series(v["time"].values, {"force [N]": panel}, window=window,
-                                                               title="virtual shake table, part B"),
-                                             out_dir / "shake_table_force.png"))
-    return figs
+def diagnose_models(part_a, part_b, models, budget: Budget, *, seed: int, out_dir: Path, say) -> dict[str, dict]:
+    """Diagnose each of ``models`` (once each, Nones skipped) on the start of part A, validated on B.
+
+    The window is the first :attr:`Budget.diagnose_s` seconds of A (all of A
+    when None); each diagnosis writes its report under
+    ``out_dir/diagnose_MODEL``. A failed diagnosis is kept as ``{"error": …}``.
+    """
+    from .diagnose import diagnose
+
+    window = part_a if budget.diagnose_s is None else part_a.isel(
+        time=slice(0, int(budget.diagnose_s * float(part_a.attrs["fs"]))))
+    diag: dict[str, dict] = {}
+    for model in dict.fromkeys(m for m in models if m is not None):
+        say(f"diagnosing {model} on {window.sizes['time'] / float(part_a.attrs['fs']):.1f} s of part A")
+        try:
+            diag[model] = diagnose(window, model, validate=part_b, seed=seed, progress=say,
+                                   out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
+        except (RuntimeError, ValueError) as exc:
+            diag[model] = {"error": str(exc)}
+    return diag
 
 
 def _strip(d):
@@ -322,9 +306,12 @@ def _strip(d):
 
 
 def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, progress=True,
-        budget: Budget | None = None, record: xr.Dataset | None = None, readme: bool = True,
+        budget: Budget | None = None, record: xr.Dataset | None = None,
         stages: tuple[str, ...] = ("compare", "spencer", "diagnose", "shake_table")) -> dict:
     """The main job. Returns the summary written to ``out_dir/summary.json``.
+
+    The summary's ``full_job`` is true for the full budget on the packaged
+    record: the run whose numbers the README shows (``scripts/update_readme.py``).
 
     Parameters
     ----------
@@ -337,8 +324,6 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         Overrides ``quick``.
     record : xarray.Dataset, optional
         A device test to use instead of the packaged NEES record.
-    readme : bool
-        Write the README's run section (only for the full job on the packaged record).
     stages : tuple of str
         Stages after the comparison (which always runs): ``spencer``,
         ``diagnose``, ``shake_table``.
@@ -364,28 +349,14 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     tab.to_csv(out_dir / "compare.csv", index=False)
 
     spencer = published_spencer(part_a, part_b, comp["rows"])
-    params = pd.DataFrame({"parameter": list(spencer["params"]),
-                           "published (SI)": list(spencer["params"].values())})
-    if "identified" in spencer:
-        params["identified (lsq, part A)"] = [spencer["identified"]["params"].get(k) for k in spencer["params"]]
-        params["sd"] = [spencer["identified"]["params_sd"].get(k) for k in spencer["params"]]
+    params = spencer_table(spencer)
     params.to_csv(out_dir / "spencer_parameters.csv", index=False)
 
     thesis_form = _best_thesis_form(comp)
     diag: dict[str, dict] = {}
     if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
         t = _time.perf_counter()
-        window = part_a if budget.diagnose_s is None else part_a.isel(
-            time=slice(0, int(budget.diagnose_s * float(part_a.attrs["fs"]))))
-        from .diagnose import diagnose
-
-        for model in dict.fromkeys(m for m in (selected, thesis_form) if m is not None):
-            say(f"diagnosing {model} on {window.sizes['time'] / float(part_a.attrs['fs']):.1f} s of part A")
-            try:
-                diag[model] = diagnose(window, model, validate=part_b, seed=seed, progress=say,
-                                       out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
-            except (RuntimeError, ValueError) as exc:
-                diag[model] = {"error": str(exc)}
+        diag = diagnose_models(part_a, part_b, (selected, thesis_form), budget, seed=seed, out_dir=out_dir, say=say)
         timing["diagnose"] = _time.perf_counter() - t
 
     vst = None
@@ -394,8 +365,8 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         vst = shake_table(part_a, part_b, thesis_form, budget, seed=seed, out_dir=out_dir, say=say)
         timing["shake_table"] = _time.perf_counter() - t
 
-    figs = _figures(out_dir, part_b, comp["rows"], comp["idata"], selected, spencer, vst)
     best = _best_by_validation(comp["rows"])
+    figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst)
     summary = {
         "budget": {k: (v if not isinstance(v, MCMCSettings) else asdict(v)) for k, v in asdict(budget).items()},
         "record": info,
@@ -404,7 +375,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
                                                      "force_nrmse": best["validation"]["force_nrmse"]},
         "spencer_1997": spencer, "diagnose": diag, "shake_table": vst, "figures": figs,
-        "stages_s": timing, "seed": seed,
+        "stages_s": timing, "seed": seed, "full_job": record is None and budget == FULL,
     }
     summary["wall_s"] = _time.perf_counter() - t0
     summary = _strip(summary)
@@ -412,157 +383,4 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     text = report_markdown(summary, tab, params)
     (out_dir / "report.md").write_text(text)
     say(f"wrote {out_dir / 'report.md'} in {summary['wall_s']:.0f} s")
-    from .readme import project_readme, update_section
-
-    readme_path = project_readme()
-    if readme and record is None and budget == FULL and readme_path.is_file():
-        update_section(readme_path, "run", readme_markdown(summary, out_dir, readme_path.parent / "figures"))
     return summary
-
-
-# --- the report ------------------------------------------------------------------------------
-
-def _row(rows, model, engine):
-    return next((r for r in rows if r["model"] == model and r["engine"] == engine and "error" not in r), None)
-
-
-def headline(summary: dict) -> list[str]:
-    """The sentences a structural engineer reads first (every number from this run)."""
-    rows, sel = summary["rows"], summary["selected"]
-    lines = []
-    rec = summary["record"]
-    lines.append(f"Record: {rec['source']} — {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz after trimming and "
-                 f"decimation by {rec['decimation']}; {rec['masked']} samples masked by quality control. "
-                 f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s.")
-    if sel:
-        bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
-        runner = min(bf, key=bf.get) if bf else None
-        lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
-                     + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
-    chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
-    if chains:
-        unconverged = [r["model"] for r in chains if not r.get("converged")]
-        lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
-                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
-                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
-                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
-                        if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
-    best = summary["best_on_part_b"]
-    sp = summary["spencer_1997"].get("part_b", {})
-    if best:
-        lines.append(f"On part B the best prediction is {best['model']} ({best['engine']}), force NRMSE "
-                     f"{fmt(best['force_nrmse'], 3)}; Spencer et al. (1997)'s published parameters give "
-                     f"{fmt(sp.get('force_nrmse'), 3)} on the same part.")
-    sel_lsq = _row(rows, sel, "lsq") if sel else None
-    if sel_lsq and sel_lsq.get("validation"):
-        lines.append(f"The selected model ({sel}, least squares) predicts part B with force NRMSE "
-                     f"{fmt(sel_lsq['validation']['force_nrmse'], 3)} (on its training part A: "
-                     f"{fmt(sel_lsq['force_nrmse'], 3)}).")
-    for model, d in (summary.get("diagnose") or {}).items():
-        if "error" in d:
-            lines.append(f"Diagnosis of {model} failed: {d['error']}")
-            continue
-        g = d["gain"]
-        lines.append(f"Diagnosis of {model} (on {d['record']['duration_s']:.1f} s of part A): cause **{d['cause']}**"
-                     + (f" (effects {', '.join(d['effects'])}); extended model {d['extended']['model']}: MSE ratio "
-                        f"{fmt(g['mse_ratio'], 3)}, Δ ln Z {fmt(g['delta_log_evidence'], 4)}, error ratio on part B "
-                        f"{fmt(g['validation_mse_ratio'], 3)}." if d["effects"] else
-                        " — no effect passes the calibrated threshold."))
-    v = summary.get("shake_table")
-    if v and "ukf" in v and "error" not in v["ukf"]:
-        u = v["ukf"]
-        lines.append(f"Virtual shake table ({v['model']}, thesis frame m = {v['frame']['mass']:g} kg): the UKF, "
-                     f"from displacement and acceleration only, implies a damper force (its restoring force less the "
-                     f"known frame's) with NRMSE {fmt(u.get('force_nrmse_a'), 3)} on A and "
-                     f"{fmt(u.get('force_nrmse_b'), 3)} on B against the measured force (its hysteretic part alone, the "
-                     f"structure model's force output: {fmt(u.get('hysteretic_nrmse_b'), 3)} on B; "
-                     f"{u.get('trained')} UKF runs trained, {u.get('diverged')} diverged).")
-    return lines
-
-
-def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> str:
-    """``report.md`` of the main job."""
-    out = ["# bayes_mr main job: the measured MR damper", ""]
-    out += [f"- {s}" for s in headline(summary)]
-    out += ["", "## Models × estimators (trained on part A; validation = part B)", "",
-            markdown_table(tab.drop(columns=[c for c in ("error",) if not tab[c].astype(bool).any()])), "",
-            f"ln Z route for selection: {summary['evidence_route']}. ln BF = ln Z(selected) − ln Z(model). "
-            "MSE: thesis eq. 3-44 on the force channel (≈ 100 when the model is right to the noise). "
-            "ln Z of each engine's rows by route: " + ", ".join(
-                f"{e} {r}" for e, r in dict.fromkeys((x["engine"], x.get("evidence_route")) for x in summary["rows"]
-                                                      if "error" not in x)) + ".", ""]
-    for form, why in summary["mcmc_skipped"].items():
-        out.append(f"- {form}: {why}.")
-    conv = [r for r in summary["rows"] if r["engine"] == "mcmc" and "error" not in r]
-    if conv:
-        out += ["", "MCMC diagnostics: " + "; ".join(
-            f"{r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
-            f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (budget)'}"
-            for r in conv) + "."]
-    out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
-            "## Spencer et al. (1997): published against identified", "",
-            f"Source: {summary['spencer_1997']['source']}.", "", markdown_table(params), ""]
-    for model, d in (summary.get("diagnose") or {}).items():
-        out += [f"## Diagnosis of {model}", ""]
-        if "error" in d:
-            out.append(f"Diagnosis failed: {d['error']}")
-        else:
-            folder = f"diagnose_{model.replace('+', '_')}"
-            ranked = ", ".join(f"{c['name']} {fmt(c['score'], 3)}" for c in d["causes"][:4])
-            out.append(f"Full report: [{folder}/diagnose.md]({folder}/diagnose.md). Cause: **{d['cause']}** "
-                       f"(scores, threshold {fmt(d['threshold'], 3)}: {ranked}).")
-            out += ["", f"![residuals]({folder}/residuals_time.png)"]
-        out.append("")
-    v = summary.get("shake_table")
-    if v:
-        out += ["## Virtual shake table", "",
-                f"Frame m = {v['frame']['mass']:g} kg, k = {v['frame']['k']:g} N/m, c = {v['frame']['c']:g} N·s/m "
-                "around the measured damper (inverse dynamics); identification from displacement and absolute "
-                "acceleration only. The damper force the identified model implies is its restoring force −m â "
-                "less the frame's c ẋ + k x (its own c and k hold frame and damper together); the hysteretic "
-                "part alone is shown beside it.", ""]
-        for label in ("ukf", "lsq"):
-            e = v.get(label, {})
-            if "error" in e:
-                out.append(f"- {label}: failed ({e['error']})")
-            elif e:
-                out.append(f"- {label}: implied damper force NRMSE {fmt(e.get('force_nrmse_a'), 3)} (A), "
-                           f"{fmt(e.get('force_nrmse_b'), 3)} (B); hysteretic part alone "
-                           f"{fmt(e.get('hysteretic_nrmse_a'), 3)} (A), {fmt(e.get('hysteretic_nrmse_b'), 3)} (B); "
-                           f"MSE {fmt(e.get('mse'), 4)} (A), {fmt(e.get('mse_b'), 4)} (B)")
-        out += ["", "![shake table](shake_table_force.png)", ""]
-    out += ["## Time", "", ", ".join(f"{k} {v:.0f} s" for k, v in summary["stages_s"].items())
-            + f"; total {summary['wall_s']:.0f} s.", ""]
-    return "\n".join(out)
-
-
-#: Figures of the main job copied next to the README (``results/`` is not under version control).
-README_FIGURES = {"force_b": "force_part_b.png", "shake_table": "shake_table_force.png"}
-
-
-def readme_markdown(summary: dict, out_dir: Path, figure_dir: Path | None = None) -> str:
-    """The README's run section: the headline and figures of this run.
-
-    With ``figure_dir`` (a folder beside the README) the figures are copied
-    there and linked relative to the README.
-    """
-    import shutil
-
-    lines = [f"- {s}" for s in headline(summary)]
-    figs = dict(summary.get("figures", {}))
-    # the diagnosis that named a cause (else the selected model's): hysteresis before/after
-    diags = [d for d in (summary.get("diagnose") or {}).values() if "error" not in d]
-    named = [d for d in diags if d["effects"]] or diags
-    if named and named[0].get("figures", {}).get("hysteresis"):
-        figs["diagnose_hysteresis"] = named[0]["figures"]["hysteresis"]
-    if figure_dir is not None:
-        figure_dir.mkdir(parents=True, exist_ok=True)
-        lines.append("")
-        for key in ("force_b", "diagnose_hysteresis", "shake_table"):
-            if key in figs and Path(figs[key]).exists():
-                target = figure_dir / f"run_{Path(figs[key]).name}"
-                shutil.copyfile(figs[key], target)
-                lines += [f"![{key}]({figure_dir.name}/{target.name})", ""]
-    lines += ["", f"Written by `make run` in {summary['wall_s'] / 60:.1f} min on this project's 2-core machine; "
-              f"full report: `{out_dir}/report.md`."]
-    return "\n".join(lines)

@@ -27,7 +27,7 @@ from bayes_mr.mainjob import FULL, QUICK, run
 
 def main(out_dir: str | Path = "results/studies/chapter5-real-record", quick: bool = False, seed: int = 0) -> dict:
     budget = replace(QUICK if quick else FULL, diagnose_s=0.0)
-    summary = run(out_dir, budget=budget, seed=seed, readme=False, progress=True,
+    summary = run(out_dir, budget=budget, seed=seed, progress=True,
                   stages=("compare", "spencer"))
     return {k: summary[k] for k in ("record", "rows", "selected", "bayes_factors", "evidence_route",
                                     "best_on_part_b", "spencer_1997", "wall_s")}

@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_mr import plots
+from bayes_mr.report import figures
 from bayes_mr.inference.lsq import fit_lsq
 from bayes_mr.inference.ukf import TAUS
 from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
-from bayes_mr.report import markdown_table
+from bayes_mr.report.markdown import markdown_table
 from bayes_mr.selection import validation
 from bayes_mr.signals import make_signal, thesis_signal
 from bayes_mr.simulate import Inputs, simulate, synthesize
@@ -147,27 +147,27 @@ def _figures(fig_dir, recs, trials):
     inputs = Inputs.from_record(rec)
     truth = simulate("dahl", inputs, get_model("dahl").theta("structure", TRUTH))
     sims = {m: simulate(m, inputs, get_model(m).theta("structure", trials[(m, 2)].theta)) for m in CANDIDATES}
-    plots.save(plots.time_series(t, {
+    figures.save(figures.time_series(t, {
         "x [m]": {"measured": rec["displacement"].values, **{m: s["displacement"] for m, s in sims.items()}},
         "ẍ+ẍ_g [m/s²]": {"measured": rec["acceleration"].values, **{m: s["acceleration"] for m, s in sims.items()}},
     }, title="Trial 2: best candidates on signal II"), fig_dir / "states.png")
     curves = {"Dahl (truth)": truth["force"], **{m: s["force"] for m, s in sims.items()}}
-    plots.save(plots.hysteresis(truth["displacement"], curves, title="Damper force, trial 2"), fig_dir / "loops.png")
+    figures.save(figures.hysteresis(truth["displacement"], curves, title="Damper force, trial 2"), fig_dir / "loops.png")
     zoom = (t >= 7.0) & (t <= 7.65)
-    plots.save(plots.hysteresis(truth["displacement"], curves, window=zoom, title="7–7.65 s (thesis Fig. 3.35)"),
-               fig_dir / "loops_zoom.png")
+    figures.save(figures.hysteresis(truth["displacement"], curves, window=zoom, title="7–7.65 s (thesis Fig. 3.35)"),
+                 fig_dir / "loops_zoom.png")
     tr = trials[("normalized-bouc-wen", 2)]
     run = tr.best
     hist = tr.training["history_mean"].sel(run=run)
-    plots.save(plots.convergence(tr.training["hist_time"].values,
-                                 {str(p): hist.sel(param=p).values for p in tr.training["param"].values},
-                                 title="Normalized Bouc–Wen, trial 2: convergence (thesis Fig. 3.47)"),
-               fig_dir / "convergence.png")
+    figures.save(figures.convergence(tr.training["hist_time"].values,
+                                    {str(p): hist.sel(param=p).values for p in tr.training["param"].values},
+                                    title="Normalized Bouc–Wen, trial 2: convergence (thesis Fig. 3.47)"),
+                 fig_dir / "convergence.png")
     for m, name in (("normalized-bouc-wen", "nbw"), ("lugre", "lugre")):
         tr = trials[(m, 1)].training
         ok = tr["status"].values == 0
-        plots.save(plots.distributions({str(p): tr["final_mean"].sel(param=p).values[ok] for p in tr["param"].values},
-                                       title=f"{m}: trained models, signal I"), fig_dir / f"trained_{name}.png")
+        figures.save(figures.distributions({str(p): tr["final_mean"].sel(param=p).values[ok] for p in tr["param"].values},
+                                          title=f"{m}: trained models, signal I"), fig_dir / f"trained_{name}.png")
 
 
 if __name__ == "__main__":

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_mr import plots
-from bayes_mr.report import markdown_table
+from bayes_mr.report import figures
+from bayes_mr.report.markdown import markdown_table
 from bayes_mr.data.ground_motions import load_ground_motion
 from bayes_mr.inference import ukf
 from bayes_mr.inference import ukf_kernel as K
@@ -104,23 +104,23 @@ def _figures(fig_dir, model, rec, problem, prior, res, ok, est):
     states = run["states"]
     theta = model.theta("structure", TRUTH)
     truth_sim = simulate(model, problem.inputs, theta)
-    plots.save(plots.time_series(t, {
+    figures.save(figures.time_series(t, {
         "x": {"simulated (truth)": truth_sim["displacement"], "UKF": states[:, 0]},
         "ẋ": {"simulated (truth)": truth_sim["velocity"], "UKF": states[:, 1]},
         "ẍ + ẍ_g": {"measured": rec["acceleration"].values,
                     "identified model": simulate(model, problem.inputs, model.theta("structure", est))["acceleration"]},
     }, title="Classic Bouc–Wen, 1 % noise: state estimates"), fig_dir / "states.png")
-    plots.save(plots.hysteresis(truth_sim["displacement"], {
+    figures.save(figures.hysteresis(truth_sim["displacement"], {
         "truth k·r": truth_sim["force"], "UKF k·r": est["k"] * states[:, 2]},
         title="Hysteretic force k·r", xlabel="x [-]", scale_x=1.0), fig_dir / "hysteresis.png")
     best = int(np.argmax(np.where(ok, res["info"][:, K.I_LOGLIK], -np.inf)))
     th_hist = problem.coords.to_theta(res["hist_mean"][best][:, ns:])
     th_t = res["hist_index"] * problem.inputs.dt
-    plots.save(plots.convergence(th_t, dict(zip(problem.coords.names, th_hist.T)), TRUTH,
-                                 title="Parameter convergence (best run)"), fig_dir / "convergence.png")
+    figures.save(figures.convergence(th_t, dict(zip(problem.coords.names, th_hist.T)), TRUTH,
+                                    title="Parameter convergence (best run)"), fig_dir / "convergence.png")
     final = problem.coords.to_theta(res["mean"][ok][:, ns:])
-    plots.save(plots.distributions(dict(zip(problem.coords.names, final.T)), TRUTH,
-                                   title="Trained models"), fig_dir / "trained.png")
+    figures.save(figures.distributions(dict(zip(problem.coords.names, final.T)), TRUTH,
+                                      title="Trained models"), fig_dir / "trained.png")
 
 
 if __name__ == "__main__":

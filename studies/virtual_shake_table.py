@@ -27,7 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from bayes_mr.mainjob import FULL, QUICK, THESIS_FORMS, prepare, shake_table
-from bayes_mr.report import markdown_table
+from bayes_mr.report.markdown import markdown_table
 from bayes_mr.results import write_json
 
 

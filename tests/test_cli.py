@@ -98,3 +98,11 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, structure_csv, capsy
     assert needle in err and len(err.splitlines()) == 1
     assert "Traceback" not in err
     assert not out.exists() and not (tmp_path / "res.nc").exists() and not (tmp_path / "sim.csv").exists()
+
+
+@pytest.mark.parametrize("argv", [["run", "--quick", "--no-readme"], ["bench", "--no-readme", "--json", "b.json"]])
+def test_no_readme_is_still_accepted(argv):
+    """--no-readme is kept as a no-op: run and bench never write README.md (scripts/update_readme.py does)."""
+    from bayes_mr.cli import build_parser
+
+    assert build_parser().parse_args(argv).no_readme

@@ -141,7 +141,7 @@ def test_residual_figures_of_a_clean_record_show_the_baseline():
     import matplotlib
 
     matplotlib.use("Agg")
-    from bayes_mr.diagnose.report import crosscorr_figure, residual_binned_figure, whiteness_figure
+    from bayes_mr.report.diagnose import crosscorr_figure, residual_binned_figure, whiteness_figure
     from bayes_mr.diagnose.residuals import residual_views
     from bayes_mr.simulate import Inputs, simulate
 

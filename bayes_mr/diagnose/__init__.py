@@ -178,7 +178,7 @@ def diagnose(
         "seed": seed,
     }
     if out_dir is not None:
-        from .report import write_report
+        from ..report.diagnose import write_report
 
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         paths = write_report(out, record, base, ext, before, after, rounds, Path(out_dir))

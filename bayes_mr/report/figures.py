@@ -1,34 +1,50 @@
-"""Figures the thesis shows, from bayes_mr results (matplotlib, Agg backend).
+"""Figures the thesis shows, from bayes_mr results, and the helpers every figure of the package uses.
 
-Each function draws one figure and returns it; :func:`save` writes a PNG and
-closes it. Nothing here computes a result: figures show what the engines
-already stored.
+Figures are made with matplotlib's object API (:class:`~matplotlib.figure.Figure`
+on an Agg canvas), never through pyplot: importing or calling this module
+leaves the user's backend and pyplot's figure list alone. Each plotting
+function draws one figure and returns it; :func:`save` writes it as PNG.
+Nothing here computes a result: figures show what the engines already stored.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 
-def save(fig, path: str | Path, dpi: int = 110) -> Path:
-    """Write ``fig`` as PNG and close it."""
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kwargs) -> tuple[Figure, object]:
+    """A new figure on its own Agg canvas and its axes (arguments as :meth:`Figure.subplots`).
+
+    Parameters
+    ----------
+    nrows, ncols : int
+        Grid of axes.
+    figsize : tuple of float
+        Width and height [inch].
+    **kwargs
+        ``sharex``, ``sharey``, ``squeeze`` … passed to :meth:`Figure.subplots`.
+    """
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)  # the figure's own canvas: no pyplot, no global backend
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
+def save(fig: Figure, path: str | Path, dpi: int = 110, metadata: dict | None = None) -> Path:
+    """Write ``fig`` as PNG at ``dpi`` [dots per inch] (``metadata``: PNG text fields, as matplotlib's)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata=metadata)
     return path
 
 
 def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "", xlabel: str = "displacement [mm]",
-               window: slice | None = None, scale_x: float = 1e3):
+               window: slice | None = None, scale_x: float = 1e3) -> Figure:
     """Force–displacement loops: each entry of ``curves`` is a force series [N]."""
-    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    fig, ax = subplots(figsize=(5.5, 4.2))
     sl = slice(None) if window is None else window
     for i, (label, f) in enumerate(curves.items()):
         ax.plot(np.asarray(x)[sl] * scale_x, np.asarray(f)[sl], lw=0.8 if i else 1.2, label=label,
@@ -42,9 +58,9 @@ def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "",
 
 
 def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, title: str = "",
-                window: tuple[float, float] | None = None):
+                window: tuple[float, float] | None = None) -> Figure:
     """Stacked panels of time series: ``panels[ylabel][label] = values``."""
-    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
+    fig, axes = subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
     t = np.asarray(t)
     sl = slice(None) if window is None else (t >= window[0]) & (t <= window[1])
     for ax, (ylabel, series) in zip(axes[:, 0], panels.items()):
@@ -60,10 +76,10 @@ def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, titl
 
 
 def convergence(t: np.ndarray, history: dict[str, np.ndarray], truth: dict[str, float] | None = None,
-                sd: dict[str, np.ndarray] | None = None, *, title: str = ""):
+                sd: dict[str, np.ndarray] | None = None, *, title: str = "") -> Figure:
     """Parameter convergence histories (thesis Fig. 3.8, 3.47, 5.24)."""
     names = list(history)
-    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.6 * len(names)), sharex=True, squeeze=False)
+    fig, axes = subplots(len(names), 1, figsize=(7, 1.6 * len(names)), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         h = np.asarray(history[name])
         ax.plot(t, h, lw=0.9)
@@ -79,12 +95,12 @@ def convergence(t: np.ndarray, history: dict[str, np.ndarray], truth: dict[str, 
     return fig
 
 
-def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None = None, *, title: str = ""):
+def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None = None, *, title: str = "") -> Figure:
     """Histograms of trained models' parameters (thesis Fig. 3.27, 5.3–5.5)."""
     names = list(values)
     cols = min(3, len(names))
     rows = int(np.ceil(len(names) / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.5 * rows), squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(3.2 * cols, 2.5 * rows), squeeze=False)
     for ax, name in zip(axes.ravel(), names):
         v = np.asarray(values[name], float)
         v = v[np.isfinite(v)]
@@ -104,9 +120,9 @@ def distributions(values: dict[str, np.ndarray], truth: dict[str, float] | None 
     return fig
 
 
-def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: int = 30):
+def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: int = 30) -> Figure:
     """Residual ``r`` against several variables: binned mean ± SD (diagnose views)."""
-    fig, axes = plt.subplots(1, len(xs), figsize=(3.2 * len(xs), 2.8), squeeze=False)
+    fig, axes = subplots(1, len(xs), figsize=(3.2 * len(xs), 2.8), squeeze=False)
     r = np.asarray(r, float)
     for ax, (label, x) in zip(axes[0], xs.items()):
         x = np.asarray(x, float)

@@ -1,27 +1,28 @@
-"""Figures and the Markdown report of a diagnosis (matplotlib, Agg backend).
+"""Figures and the Markdown report of a diagnosis (:func:`bayes_mr.diagnose.diagnose`).
 
-Everything drawn here was computed before (:mod:`.residuals`, :mod:`.screen`);
-figures are deterministic for a given diagnosis. The figures are drawn
-directly with matplotlib rather than through :mod:`bayes_mr.plots`, which
-sits above diagnose in the package's layering.
+Everything drawn here was computed before (:mod:`bayes_mr.diagnose.residuals`,
+:mod:`bayes_mr.diagnose.screen`); figures are deterministic for a given
+diagnosis and drawn with the object API of :mod:`.figures` (no pyplot, no
+global backend). This module imports nothing of :mod:`bayes_mr.diagnose` at
+run time (the fits and residual views it draws are passed in), so the lazy
+call from ``diagnose(out_dir=...)`` makes no import cycle.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
+import xarray as xr
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+from .figures import save, subplots
+from .markdown import fmt
 
-from ..report import fmt  # noqa: E402
-from .fits import Fit  # noqa: E402
-from .residuals import Views  # noqa: E402
+if TYPE_CHECKING:  # annotations only
+    from ..diagnose.fits import Fit
+    from ..diagnose.residuals import Views
 
 #: Most points drawn per line (long records are thinned evenly).
 MAX_POINTS = 20000
@@ -32,10 +33,8 @@ UNITS = {"displacement": "m", "acceleration": "m/s²", "force": "N", "time": "s"
 
 
 def _save(fig, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, bbox_inches="tight", metadata={"Software": None})
-    plt.close(fig)
-    return path
+    # dpi 100 and no "Software" PNG text field: the diagnosis figures as they have always been written
+    return save(fig, path, dpi=100, metadata={"Software": None})
 
 
 def _thin(n: int) -> slice:
@@ -66,7 +65,7 @@ def hysteresis_figure(record: xr.Dataset, base: Fit, ext: Fit, window: slice):
     x = record["displacement"].values[window] * 1e3
     f = _restoring(record, None)[window]
     label = "force [N]" if record.attrs["kind"] == "device" else "restoring force −m·a [N]"
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    fig, axes = subplots(1, 2, figsize=(10, 4), sharey=True)
     t = record["time"].values[window]
     for ax, fit, title in ((axes[0], base, "before"), (axes[1], ext, "after")):
         ax.plot(x, f, color="0.55", lw=1.2, label="measured")
@@ -83,7 +82,7 @@ def hysteresis_figure(record: xr.Dataset, base: Fit, ext: Fit, window: slice):
 def residual_time_figure(record: xr.Dataset, before: Views, after: Views, base: Fit, ext: Fit):
     """Residual of each measured channel against time, before and after."""
     chans = list(before.channels)
-    fig, axes = plt.subplots(len(chans), 1, figsize=(9, 2.2 * len(chans)), sharex=True, squeeze=False)
+    fig, axes = subplots(len(chans), 1, figsize=(9, 2.2 * len(chans)), sharex=True, squeeze=False)
     t = record["time"].values
     sl = _thin(t.size)
     for ax, c in zip(axes[:, 0], chans):
@@ -104,7 +103,7 @@ def residual_binned_figure(before: Views, after: Views):
     """Standardised residual against each variable (binned mean ± SD), before and after; η² in titles."""
     chans = list(before.channels)
     variables = list(next(iter(before.channels.values())).bins)
-    fig, axes = plt.subplots(len(chans), len(variables), figsize=(2.9 * len(variables), 2.4 * len(chans)),
+    fig, axes = subplots(len(chans), len(variables), figsize=(2.9 * len(variables), 2.4 * len(chans)),
                              squeeze=False)
     for i, c in enumerate(chans):
         for j, v in enumerate(variables):
@@ -129,7 +128,7 @@ def residual_binned_figure(before: Views, after: Views):
 def whiteness_figure(before: Views, after: Views, n: int):
     """Residual autocorrelation of each channel, before and after, with the white-noise band."""
     chans = list(before.channels)
-    fig, axes = plt.subplots(1, len(chans), figsize=(4 * len(chans), 3), squeeze=False)
+    fig, axes = subplots(1, len(chans), figsize=(4 * len(chans), 3), squeeze=False)
     band = 1.96 / math.sqrt(n)
     for ax, c in zip(axes[0], chans):
         for views, color, label in ((before, "tab:blue", "before"), (after, "tab:red", "after")):
@@ -153,7 +152,7 @@ def crosscorr_figure(before: Views, after: Views):
     pairs = list(before.cross)
     chans = list(before.input_cross)
     ncol = max(len(pairs), len(chans), 1)
-    fig, axes = plt.subplots(2, ncol, figsize=(4 * ncol, 5.5), squeeze=False)
+    fig, axes = subplots(2, ncol, figsize=(4 * ncol, 5.5), squeeze=False)
     for ax, key in zip(axes[0], pairs):
         lags, cm, cs = before.cross[key]
         ax.plot(lags, cm, color="0.4", lw=1.2, label="measured")
@@ -183,7 +182,7 @@ def crosscorr_figure(before: Views, after: Views):
 def scores_figure(causes: list[dict], threshold: float):
     """Round-one score of every candidate effect with the decision threshold."""
     rows = [c for c in causes if c.get("score") is not None][::-1]
-    fig, ax = plt.subplots(figsize=(6.5, 0.35 * len(rows) + 1.2))
+    fig, ax = subplots(figsize=(6.5, 0.35 * len(rows) + 1.2))
     labels = [c["name"] + (f" ({c['channel']})" if c.get("channel") else "") for c in rows]
     values = [c["score"] for c in rows]
     colors = ["tab:red" if c.get("selected") else "tab:gray" for c in rows]
@@ -279,8 +278,3 @@ def write_report(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before: Vie
     report = out_dir / "diagnose.md"
     report.write_text(_markdown(out, figures))
     return {**figures, "report": report}
-
-
-def dumps(out: dict) -> str:
-    """The diagnosis as JSON text (non-finite numbers as null)."""
-    return json.dumps(out, indent=2, allow_nan=False)

@@ -1,0 +1,204 @@
+"""The main job's report (:func:`bayes_mr.mainjob.run`): its figures, its headline and ``report.md``.
+
+Every sentence and table is built from the run's summary (the dict written
+to ``summary.json``), so the README's run section (:mod:`.readme`) can be
+rebuilt from that file alone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import xarray as xr
+
+from ..identify import predict
+from .figures import hysteresis, save, time_series
+from .markdown import fmt, markdown_table
+
+
+def _row(rows: list[dict], model: str | None, engine: str) -> dict | None:
+    """The row of ``model`` × ``engine`` that did not fail (None if none)."""
+    return next((r for r in rows if r["model"] == model and r["engine"] == engine and "error" not in r), None)
+
+
+def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: str | None, best: dict | None,
+                spencer: dict, vst: dict | None) -> dict[str, str]:
+    """Force on B (measured, selected identified, published Spencer), loops, and the shake-table force.
+
+    Parameters
+    ----------
+    out_dir : Path
+        Folder of the PNGs.
+    part_b : xarray.Dataset
+        Part B of the record (never fitted).
+    rows : list of dict
+        The comparison's rows (``model``, ``engine``, ``params`` [SI], ``validation``).
+    selected : str or None
+        The model selected by evidence.
+    best : dict or None
+        The row with the lowest force NRMSE on part B.
+    spencer : dict
+        :func:`bayes_mr.mainjob.published_spencer` (``params`` [SI]).
+    vst : dict or None
+        :func:`bayes_mr.mainjob.shake_table` with its private arrays (``_vst_b``, ``_force_b``).
+
+    Returns
+    -------
+    dict
+        Figure name → path of the PNG.
+    """
+    figs = {}
+    t = part_b["time"].values
+    x = part_b["displacement"].values
+    curves = {"measured": part_b["force"].values}
+    sel = _row(rows, selected, "lsq")
+    for label, r in ((f"{selected} (lsq, selected by evidence)", sel),
+                     (f"{best['model']} ({best['engine']}, best on B)" if best else "", best)):
+        if r is not None and label not in curves:
+            try:
+                curves[label] = predict(r["model"], part_b, r["params"])["force"]
+            except ValueError:
+                pass
+    try:
+        curves["Spencer 1997 published"] = predict("spencer", part_b, spencer["params"])["force"]
+    except ValueError:
+        pass
+    window = (0.0, min(4.0, float(t[-1])))
+    figs["force_b"] = str(save(time_series(t, {"force [N]": curves}, window=window,
+                                         title="part B (never fitted): damper force"),
+                             out_dir / "force_part_b.png"))
+    sl = slice(0, int(window[1] * float(part_b.attrs["fs"])))
+    figs["hysteresis_b"] = str(save(hysteresis(x, curves, window=sl, title="part B: force–displacement"),
+                                  out_dir / "hysteresis_part_b.png"))
+    if vst is not None and "_vst_b" in vst:
+        v = vst["_vst_b"]
+        panel = {"measured damper force": v["force"].values}
+        for label in ("ukf", "lsq"):
+            implied = vst.get(label, {}).get("_force_b")
+            if implied is not None:
+                panel[f"implied by {label} fit (from x and a only)"] = implied
+        figs["shake_table"] = str(save(time_series(v["time"].values, {"force [N]": panel}, window=window,
+                                                 title="virtual shake table, part B"),
+                                     out_dir / "shake_table_force.png"))
+    return figs
+
+
+def spencer_table(spencer: dict) -> pd.DataFrame:
+    """Published Spencer (1997) parameters [SI] beside the identified ones (least squares on part A, and SD)."""
+    params = pd.DataFrame({"parameter": list(spencer["params"]),
+                           "published (SI)": list(spencer["params"].values())})
+    if "identified" in spencer:
+        params["identified (lsq, part A)"] = [spencer["identified"]["params"].get(k) for k in spencer["params"]]
+        params["sd"] = [spencer["identified"]["params_sd"].get(k) for k in spencer["params"]]
+    return params
+
+
+def headline(summary: dict) -> list[str]:
+    """The sentences a structural engineer reads first (every number from this run)."""
+    rows, sel = summary["rows"], summary["selected"]
+    lines = []
+    rec = summary["record"]
+    lines.append(f"Record: {rec['source']} — {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz after trimming and "
+                 f"decimation by {rec['decimation']}; {rec['masked']} samples masked by quality control. "
+                 f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s.")
+    if sel:
+        bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
+        runner = min(bf, key=bf.get) if bf else None
+        lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
+                     + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
+    chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
+    if chains:
+        unconverged = [r["model"] for r in chains if not r.get("converged")]
+        lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
+                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
+                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
+                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
+                        if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
+    best = summary["best_on_part_b"]
+    sp = summary["spencer_1997"].get("part_b", {})
+    if best:
+        lines.append(f"On part B the best prediction is {best['model']} ({best['engine']}), force NRMSE "
+                     f"{fmt(best['force_nrmse'], 3)}; Spencer et al. (1997)'s published parameters give "
+                     f"{fmt(sp.get('force_nrmse'), 3)} on the same part.")
+    sel_lsq = _row(rows, sel, "lsq") if sel else None
+    if sel_lsq and sel_lsq.get("validation"):
+        lines.append(f"The selected model ({sel}, least squares) predicts part B with force NRMSE "
+                     f"{fmt(sel_lsq['validation']['force_nrmse'], 3)} (on its training part A: "
+                     f"{fmt(sel_lsq['force_nrmse'], 3)}).")
+    for model, d in (summary.get("diagnose") or {}).items():
+        if "error" in d:
+            lines.append(f"Diagnosis of {model} failed: {d['error']}")
+            continue
+        g = d["gain"]
+        lines.append(f"Diagnosis of {model} (on {d['record']['duration_s']:.1f} s of part A): cause **{d['cause']}**"
+                     + (f" (effects {', '.join(d['effects'])}); extended model {d['extended']['model']}: MSE ratio "
+                        f"{fmt(g['mse_ratio'], 3)}, Δ ln Z {fmt(g['delta_log_evidence'], 4)}, error ratio on part B "
+                        f"{fmt(g['validation_mse_ratio'], 3)}." if d["effects"] else
+                        " — no effect passes the calibrated threshold."))
+    v = summary.get("shake_table")
+    if v and "ukf" in v and "error" not in v["ukf"]:
+        u = v["ukf"]
+        lines.append(f"Virtual shake table ({v['model']}, thesis frame m = {v['frame']['mass']:g} kg): the UKF, "
+                     f"from displacement and acceleration only, implies a damper force (its restoring force less the "
+                     f"known frame's) with NRMSE {fmt(u.get('force_nrmse_a'), 3)} on A and "
+                     f"{fmt(u.get('force_nrmse_b'), 3)} on B against the measured force (its hysteretic part alone, the "
+                     f"structure model's force output: {fmt(u.get('hysteretic_nrmse_b'), 3)} on B; "
+                     f"{u.get('trained')} UKF runs trained, {u.get('diverged')} diverged).")
+    return lines
+
+
+def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> str:
+    """``report.md`` of the main job."""
+    out = ["# bayes_mr main job: the measured MR damper", ""]
+    out += [f"- {s}" for s in headline(summary)]
+    out += ["", "## Models × estimators (trained on part A; validation = part B)", "",
+            markdown_table(tab.drop(columns=[c for c in ("error",) if not tab[c].astype(bool).any()])), "",
+            f"ln Z route for selection: {summary['evidence_route']}. ln BF = ln Z(selected) − ln Z(model). "
+            "MSE: thesis eq. 3-44 on the force channel (≈ 100 when the model is right to the noise). "
+            "ln Z of each engine's rows by route: " + ", ".join(
+                f"{e} {r}" for e, r in dict.fromkeys((x["engine"], x.get("evidence_route")) for x in summary["rows"]
+                                                      if "error" not in x)) + ".", ""]
+    for form, why in summary["mcmc_skipped"].items():
+        out.append(f"- {form}: {why}.")
+    conv = [r for r in summary["rows"] if r["engine"] == "mcmc" and "error" not in r]
+    if conv:
+        out += ["", "MCMC diagnostics: " + "; ".join(
+            f"{r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
+            f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (budget)'}"
+            for r in conv) + "."]
+    out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
+            "## Spencer et al. (1997): published against identified", "",
+            f"Source: {summary['spencer_1997']['source']}.", "", markdown_table(params), ""]
+    for model, d in (summary.get("diagnose") or {}).items():
+        out += [f"## Diagnosis of {model}", ""]
+        if "error" in d:
+            out.append(f"Diagnosis failed: {d['error']}")
+        else:
+            folder = f"diagnose_{model.replace('+', '_')}"
+            ranked = ", ".join(f"{c['name']} {fmt(c['score'], 3)}" for c in d["causes"][:4])
+            out.append(f"Full report: [{folder}/diagnose.md]({folder}/diagnose.md). Cause: **{d['cause']}** "
+                       f"(scores, threshold {fmt(d['threshold'], 3)}: {ranked}).")
+            out += ["", f"![residuals]({folder}/residuals_time.png)"]
+        out.append("")
+    v = summary.get("shake_table")
+    if v:
+        out += ["## Virtual shake table", "",
+                f"Frame m = {v['frame']['mass']:g} kg, k = {v['frame']['k']:g} N/m, c = {v['frame']['c']:g} N·s/m "
+                "around the measured damper (inverse dynamics); identification from displacement and absolute "
+                "acceleration only. The damper force the identified model implies is its restoring force −m â "
+                "less the frame's c ẋ + k x (its own c and k hold frame and damper together); the hysteretic "
+                "part alone is shown beside it.", ""]
+        for label in ("ukf", "lsq"):
+            e = v.get(label, {})
+            if "error" in e:
+                out.append(f"- {label}: failed ({e['error']})")
+            elif e:
+                out.append(f"- {label}: implied damper force NRMSE {fmt(e.get('force_nrmse_a'), 3)} (A), "
+                           f"{fmt(e.get('force_nrmse_b'), 3)} (B); hysteretic part alone "
+                           f"{fmt(e.get('hysteretic_nrmse_a'), 3)} (A), {fmt(e.get('hysteretic_nrmse_b'), 3)} (B); "
+                           f"MSE {fmt(e.get('mse'), 4)} (A), {fmt(e.get('mse_b'), 4)} (B)")
+        out += ["", "![shake table](shake_table_force.png)", ""]
+    out += ["## Time", "", ", ".join(f"{k} {v:.0f} s" for k, v in summary["stages_s"].items())
+            + f"; total {summary['wall_s']:.0f} s.", ""]
+    return "\n".join(out)

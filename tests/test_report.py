@@ -1,0 +1,98 @@
+"""The reporting layer: no global matplotlib state touched, README sections built from JSON by the script."""
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from bayes_mr.report.readme import bench_section, run_section
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_importing_and_drawing_leave_matplotlib_alone():
+    """A notebook's backend and pyplot's figure list are the same after the package drew and saved a figure."""
+    code = """
+import matplotlib
+matplotlib.use("svg")
+import bayes_mr.cli, bayes_mr.mainjob, bayes_mr.bench, bayes_mr.diagnose
+from bayes_mr.report import diagnose, figures, readme, run
+import numpy as np, sys, tempfile, pathlib
+t = np.linspace(0, 1, 50)
+figures.save(figures.time_series(t, {"x": {"a": t}}), pathlib.Path(tempfile.mkdtemp()) / "f.png")
+import matplotlib.pyplot as plt
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert plt.get_fignums() == [], plt.get_fignums()
+"""
+    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, env={**env, "PYTHONPATH": str(ROOT)})
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("update_readme", ROOT / "scripts" / "update_readme.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+BENCH = {"ukf_model": "dahl (structure test, 7 augmented states, thesis signal I)", "ukf_us_per_step": 6.47,
+         "ukf_us_per_step_single": 11.31, "filterpy_us_per_step": 1219.0, "filterpy_compiled_fx_us_per_step": 784.0,
+         "speedup": 188.4, "speedup_single": 107.8, "max_state_diff": 1.8e-11, "filterpy_steps_compared": 1500,
+         "threads": 2, "train_100_priors_s": 84.8, "trained_fraction": 1.0, "train_samples": 163840,
+         "train_best_rel_error": {"c": 0.0011, "k": 0.0002}, "lsq_s": 4.3, "mcmc_s": 254.0, "mcmc_steps": 3000,
+         "mcmc_walkers": 24, "mcmc_converged": True, "mcmc_tau_max": 24.0, "mcmc_rhat_max": 1.008,
+         "mcmc_record": "dahl, 25 s at 1000 Hz", "diagnose_s": 50.0, "diagnose_cause": "force_offset",
+         "diagnose_mse_ratio": 0.007, "diagnose_record": "dahl + 2 N force offset hidden, 30 s at 1000 Hz"}
+
+
+def test_bench_section_is_written_between_the_markers_only(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("# title\n\n<!-- bench:start -->\nold\n<!-- bench:end -->\n\nafter\n")
+    bench = tmp_path / "bench.json"
+    bench.write_text(json.dumps(BENCH))
+    assert _script().main(["bench", "--json", str(bench), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert text.startswith("# title\n\n<!-- bench:start -->\n| measured | value |") and text.endswith("\n\nafter\n")
+    assert "| speedup (as used / like for like) | 188× / 108× |" in text and "old" not in text
+    assert bench_section(BENCH) in text
+
+
+def _summary(out: Path) -> dict:
+    (out / "force_part_b.png").write_bytes(b"png")
+    return {
+        "record": {"source": "nees", "duration_s": 21.6, "fs": 250.0, "decimation": 12, "masked": 0,
+                   "part_a_s": 13.0, "part_b_s": 8.6},
+        "rows": [{"model": "dahl", "engine": "lsq", "force_nrmse": 0.2, "validation": {"force_nrmse": 0.25}}],
+        "selected": "dahl", "bayes_factors": {"dahl": 0.0}, "evidence_route": "laplace",
+        "best_on_part_b": {"model": "dahl", "engine": "lsq", "force_nrmse": 0.25},
+        "spencer_1997": {"part_b": {"force_nrmse": 0.3}}, "diagnose": {}, "shake_table": None,
+        "figures": {"force_b": str(out / "force_part_b.png"), "shake_table": str(out / "missing.png")},
+        "wall_s": 738.0, "full_job": True,
+    }
+
+
+def test_run_section_from_the_summary_json(tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    summary = _summary(out)
+    (out / "summary.json").write_text(json.dumps(summary))
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- run:start -->\n<!-- run:end -->\n")
+    assert _script().main(["run", "--out", str(out), "--readme", str(readme)]) == 0
+    assert (tmp_path / "figures" / "run_force_part_b.png").read_bytes() == b"png"
+    text = readme.read_text()
+    assert run_section(summary, out, {"force_b": "figures/run_force_part_b.png"}) in text
+    assert "Selected by laplace evidence: **dahl**." in text and "in 12.3 min" in text
+    assert "shake_table" not in text  # its PNG does not exist: no broken link
+
+
+def test_a_quick_run_leaves_the_readme_alone(tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "summary.json").write_text(json.dumps({**_summary(out), "full_job": False}))
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- run:start -->\nkept\n<!-- run:end -->\n")
+    _script().main(["run", "--out", str(out), "--readme", str(readme)])
+    assert "kept" in readme.read_text() and not (tmp_path / "figures").exists()
