@@ -1,3 +1,73 @@
-"""bayes_mr: Bayesian identification, selection and diagnosis of MR-damper models."""
+"""bayes_mr: Bayesian identification, selection and diagnosis of MR-damper models.
+
+Everything a notebook needs is one import away::
+
+    import bayes_mr as bm
+
+    record = bm.load("test.csv", mass=50.0)               # read, check, mask faults
+    idata = bm.Identify("dahl", bm.Emcee()).fit(record)   # any engine, one result schema
+    table = bm.compare(record, ["dahl", "lugre"], engines=("lsq",))
+    report = bm.diagnose(record, "dahl")                  # residual → cause → extension → gain
+
+Names are resolved on first use (PEP 562), so ``import bayes_mr`` stays cheap
+and has no side effects; the contract (columns, model and effect names, CLI
+verbs, JSON keys) is in ``docs/CONTRACT.md``.
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
+
+#: Public name → (module, attribute).
+_PUBLIC = {
+    # records
+    "load": ("bayes_mr.data", "load"),
+    "load_packaged": ("bayes_mr.data", "load_packaged"),
+    "write_record": ("bayes_mr.data", "write_record"),
+    "make_record": ("bayes_mr.data", "make_record"),
+    "RecordError": ("bayes_mr.data", "RecordError"),
+    # models and simulation
+    "get_model": ("bayes_mr.models", "get_model"),
+    "Model": ("bayes_mr.models", "Model"),
+    "simulate": ("bayes_mr.simulate", "simulate"),
+    "synthesize": ("bayes_mr.simulate", "synthesize"),
+    "Inputs": ("bayes_mr.simulate", "Inputs"),
+    "make_signal": ("bayes_mr.signals", "make_signal"),
+    # one likelihood, three engines, one result schema
+    "OutputError": ("bayes_mr.likelihood", "OutputError"),
+    "Identify": ("bayes_mr.identify", "Identify"),
+    "validate": ("bayes_mr.identify", "validate"),
+    "LeastSquares": ("bayes_mr.inference.estimators", "LeastSquares"),
+    "Emcee": ("bayes_mr.inference.estimators", "Emcee"),
+    "UKF": ("bayes_mr.inference.estimators", "UKF"),
+    "engine": ("bayes_mr.inference.estimators", "engine"),
+    "Posterior": ("bayes_mr.inference.base", "Posterior"),
+    "LSQSettings": ("bayes_mr.inference.lsq", "LSQSettings"),
+    "MCMCSettings": ("bayes_mr.inference.mcmc", "MCMCSettings"),
+    "UKFSettings": ("bayes_mr.inference.ukf", "UKFSettings"),
+    "summary_of": ("bayes_mr.results", "summary_of"),
+    "point_of": ("bayes_mr.results", "point_of"),
+    "save": ("bayes_mr.results", "save"),
+    "load_result": ("bayes_mr.results", "load_result"),
+    "score": ("bayes_mr.scores", "score"),
+    # comparison and diagnosis
+    "compare": ("bayes_mr.compare", "compare"),
+    "diagnose": ("bayes_mr.diagnose", "diagnose"),
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'bayes_mr' has no attribute {name!r}")
+    module, attr = _PUBLIC[name]
+    value = getattr(importlib.import_module(module), attr)
+    globals()[name] = value  # resolve once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_PUBLIC))

@@ -49,7 +49,7 @@ from .identify import UKF, Emcee, Identify, LeastSquares, predict
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
-from .metrics import force_nrmse
+from .scores import force_nrmse
 from .models import FORMS, get_model
 from .progress import say as progress_say
 from .report.run import report_markdown, run_figures, spencer_table

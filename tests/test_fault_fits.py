@@ -38,7 +38,7 @@ from bayes_mr.data.quality import apply_quality, report_of
 from bayes_mr.identify import predict
 from bayes_mr.inference.lsq import LSQSettings, fit_lsq
 from bayes_mr.likelihood import OutputError, channel_noise
-from bayes_mr.metrics import force_nrmse
+from bayes_mr.scores import force_nrmse
 
 #: Least squares, a little cheaper than the default (both fits of a pair use the same).
 SETTINGS = LSQSettings(n_candidates=24, n_starts=2, seed=0)

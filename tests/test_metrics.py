@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_mr.metrics import force_errors, force_nrmse, mse
+from bayes_mr.scores import force_errors, force_nrmse, mse
 
 # displacement errors 0, 0, 0, 1; acceleration errors 0, 2, 0, 0
 X = np.array([1.0, 2.0, 3.0, 4.0])

@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time as _time
@@ -134,30 +135,43 @@ def diagnose(
     t0 = _time.perf_counter()
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
-    kind = record.attrs["kind"]
-    if kind == "structure" and "mass" not in record.attrs:
+    if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
         raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
     if model is None:
         base, baselines = select_baseline(record, settings=settings, progress=say)
     else:
-        base = fit_model(record, get_model(model), settings)
-        baselines = None
+        base, baselines = fit_model(record, get_model(model), settings), None
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
                                       progress=say)
     ext = selected[-1].fit if selected else base
     after = residual_views(record, ext.predicted) if selected else before
+    say(f"named: {', '.join(c.name for c in selected) or NONE}")
+    validation = _validate(base, ext, validate, record) if validate is not None else None
+    out = _report(record, base, ext, selected, rounds, validation, baselines)
+    out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed)
+    if out_dir is not None:
+        from ..report.diagnose import write_report
+
+        out["wall_s"] = round(_time.perf_counter() - t0, 2)
+        paths = write_report(out, record, base, ext, before, after, rounds, Path(out_dir))
+        out["figures"] = {k: str(v) for k, v in paths.items() if k != "report"}
+        out["report"] = str(paths["report"])
+    out["wall_s"] = round(_time.perf_counter() - t0, 2)
+    if out_dir is not None:
+        (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
+    return out
+
+
+def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], rounds, validation,
+            baselines) -> dict:
+    """The ``diagnose`` JSON keys of a finished diagnosis (without timing and figures)."""
     names = [c.name for c in selected]
-    say(f"named: {', '.join(names) or NONE}")
-
-    validation = None
-    if validate is not None:
-        validation = _validate(base, ext, validate, record)
-
-    out = {
-        "record": {"source": str(record.attrs.get("source", "")), "kind": kind, "samples": int(record.sizes["time"]),
-                   "fs": float(record.attrs["fs"]), "duration_s": float(record.sizes["time"] / record.attrs["fs"])},
+    return {
+        "record": {"source": str(record.attrs.get("source", "")), "kind": record.attrs["kind"],
+                   "samples": int(record.sizes["time"]), "fs": float(record.attrs["fs"]),
+                   "duration_s": float(record.sizes["time"] / record.attrs["fs"])},
         "masked": int((~record["valid"].values.astype(bool)).sum()),
         "baseline": _fit_dict(base),
         "baselines": baselines,
@@ -173,23 +187,7 @@ def diagnose(
             "validation_mse_ratio": validation["mse_ratio"] if validation else None,
         },
         "validation": validation,
-        "threshold": threshold,
-        "residuals": {"before": before.summary(), "after": after.summary()},
-        "seed": seed,
     }
-    if out_dir is not None:
-        from ..report.diagnose import write_report
-
-        out["wall_s"] = round(_time.perf_counter() - t0, 2)
-        paths = write_report(out, record, base, ext, before, after, rounds, Path(out_dir))
-        out["figures"] = {k: str(v) for k, v in paths.items() if k != "report"}
-        out["report"] = str(paths["report"])
-    out["wall_s"] = round(_time.perf_counter() - t0, 2)
-    if out_dir is not None:
-        import json
-
-        (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
-    return out
 
 
 def _num(v) -> float | None:

@@ -35,6 +35,7 @@ class LeastSquares:
     Attributes
     ----------
     settings : LSQSettings
+        Starts, tolerances and the seed of the candidates.
     n_draws : int
         Draws of the Laplace posterior stored as the ``posterior`` group.
     """
@@ -112,6 +113,7 @@ class UKF:
     Attributes
     ----------
     settings : UKFSettings
+        Sigma points, random walks, sub-step control.
     n_lhs : int
         Latin-hypercube prior means (× ``taus`` = runs; the thesis's 10 × 10).
     taus : tuple of float

@@ -165,21 +165,9 @@ def force_nrmse(f: np.ndarray, f_hat: np.ndarray, valid: np.ndarray | None = Non
     JSON reports it as ``force_nrmse``. A model that predicts the mean force
     scores 1.
 
-    Parameters
-    ----------
-    f, f_hat : array, shape (n,)
-        Measured and predicted force [N].
-    valid : bool array, shape (n,), optional
-        True for samples to score; default all.
-
-    Returns
-    -------
-    float
-
-    Raises
-    ------
-    ValueError
-        As :func:`mse`, or a constant measured force (SD = 0).
+    ``f``, ``f_hat`` are the measured and predicted force [N], shape (n,);
+    ``valid`` as in :func:`mse`. Raises ValueError as :func:`mse` does, or for
+    a constant measured force (SD = 0).
     """
     arr, _ = _prepare({"f": f, "f_hat": f_hat}, valid)
     sd = np.sqrt(np.mean((arr["f"] - arr["f"].mean()) ** 2))

@@ -30,9 +30,9 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from .data.derive import smooth_velocity
-from .data.schema import OUTPUTS
-from .likelihood import channel_noise
+from ..data.derive import smooth_velocity
+from ..data.schema import OUTPUTS
+from ..likelihood import channel_noise
 from .metrics import force_errors, force_nrmse, mse
 
 
