@@ -14,7 +14,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, delay, simulate
+from bayes_mr.simulate import delay, simulate
+from records import device_inputs, structure_inputs
 
 
 def sgn(v):
@@ -137,34 +138,6 @@ def reference_simulation(model, kind, theta, inputs):
         if has_env:
             env_k = max(abs(rows[k + 1][0]), env_k * math.exp(-dt / t_env))
     return np.array(out)
-
-
-def _excitation(n, dt, seed):
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * dt
-    freqs = rng.uniform(0.5, 6.0, 5)
-    amps = rng.uniform(0.3, 1.0, 5)
-    phases = rng.uniform(0, 2 * np.pi, 5)
-    x = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    xd = sum(a * 2 * np.pi * f * np.cos(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    xdd = -sum(a * (2 * np.pi * f) ** 2 * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    ramp = np.clip(t / 0.2, 0, 1)  # start from rest
-    return t, x * ramp, xd * ramp, xdd * ramp
-
-
-def _voltage(t):
-    return np.where(np.sin(2 * np.pi * 0.7 * t) > 0, 2.25, 0.0)
-
-
-def device_inputs(amplitude, n=1500, fs=1000.0, seed=0, voltage=True):
-    t, x, xd, _ = _excitation(n, 1 / fs, seed)
-    scale = amplitude / np.abs(x).max()
-    return Inputs.device(x * scale, xd * scale, 1 / fs, _voltage(t) if voltage else None)
-
-
-def structure_inputs(accel, mass, n=1500, fs=1000.0, seed=1, voltage=True):
-    t, _, _, xdd = _excitation(n, 1 / fs, seed)
-    return Inputs.structure(xdd * accel / np.abs(xdd).max(), 1 / fs, mass, _voltage(t) if voltage else None)
 
 
 THESIS_FRAME = dict(mass=50.0, accel=3.0)

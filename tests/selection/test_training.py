@@ -22,7 +22,7 @@ from bayes_mr.selection import (
     Trial, concat_records, method1, method2, method3, score, select, train, validate_runs,
 )
 from bayes_mr.selection.ukf_fit import ukf_fit
-from test_ukf import structure_record
+from records import signal_record, structure_record
 
 # few priors (3 LHS × 3 τ) on short records keep the file fast; the τ are thesis values
 SMALL = dict(n_lhs=3, taus=(0.01, 0.1, 0.5), progress=False)
@@ -321,13 +321,11 @@ def test_method3_trains_on_both_and_validates_on_both(dahl_a, dahl_b):
 def test_method1_on_a_device_test():
     """The damper alone under band-limited motion: force is the measured channel."""
     from bayes_mr.models import get_model
-    from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
 
     model = get_model("dahl")
     theta = model.theta("device", {})
-    sig = make_signal("blwn", duration=6.0, fs=1000.0, amplitude=3e-3, fmax=10.0, seed=1)
-    rec = synthesize(model, theta, sig.time, sig.as_input("device"), noise=0.01, seed=1, source="device")
+    rec = signal_record(model, "device", duration=6.0, fs=1000.0, amplitude=3e-3, fmax=10.0, signal_seed=1,
+                        noise=0.01, seed=1, source="device")
     trial = method1(model, rec, seed=0, **SMALL)
     assert trial.training.attrs["kind"] == "device"
     assert np.max(np.abs(_rel(trial, theta))) < 0.05

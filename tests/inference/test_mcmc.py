@@ -161,7 +161,7 @@ def test_walker_count_rules():
 
 def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     """A short dahl posterior → InferenceData with every group, SPEC summary keys, and a netCDF round trip."""
-    from test_ukf import structure_record
+    from records import structure_record
 
     from bayes_mr import results
     from bayes_mr.inference.evidence import laplace_evidence
