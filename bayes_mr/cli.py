@@ -1,4 +1,4 @@
-"""The ``bayes-mr`` command (verbs and flags fixed by ``../shared/SPEC.md``).
+"""The ``bayes-mr`` command (verbs and flags fixed by ``docs/CONTRACT.md``).
 
 Bad input ends with one line on stderr naming file, column, row and what to
 do, exit status 2, and nothing written. Ctrl-C ends with status 130.

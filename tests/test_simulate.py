@@ -1,7 +1,7 @@
 """The compiled simulator against an independent high-accuracy integration.
 
-The reference right-hand sides below are written again from the SPEC's
-equations in plain Python (not the kernel), and integrated with
+The reference right-hand sides below are written again from the equations of docs/CONTRACT.md
+in plain Python (not the kernel), and integrated with
 ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) sample interval by sample
 interval with the same linear-in-time input. Agreement to NRMSE ≤ 1e-3 checks
 both the equations and the RK4 sub-stepping.
@@ -23,7 +23,7 @@ def sgn(v):
 
 
 def hyst_rate(form, q, w, z):
-    """ż of the single-state forms, from the SPEC table."""
+    """ż of the single-state forms, from the model table of docs/CONTRACT.md."""
     if form == "normalized-bouc-wen":
         return q["rho"] * (w - q["sigma"] * abs(w) * sgn(z) * abs(z) ** q["n"] + (q["sigma"] - 1) * w * abs(z) ** q["n"])
     if form == "dahl":
@@ -39,7 +39,7 @@ HYST_COEF = {"normalized-bouc-wen": "k_z", "dahl": "F_d", "lugre": "beta", "bouc
 
 
 def reference_rhs(model, kind, q, mass, t, s, x_in, v_in, volt, env):
-    """(ṡ, f_r, f_damper) written from the SPEC, independent of the kernel."""
+    """(ṡ, f_r, f_damper) written from docs/CONTRACT.md, independent of the kernel."""
     form = model.form.name
     effects = {e.name for e in model.effects}
     ds = np.zeros_like(s)
@@ -209,7 +209,7 @@ def test_stiff_dahl_needs_and_gets_substeps():
 
 
 def test_spencer_published_substeps_at_3khz():
-    """The SPEC's warning: published Spencer parameters need tens of sub-steps at 3 kHz."""
+    """The contract's warning (docs/CONTRACT.md): published Spencer parameters need tens of sub-steps at 3 kHz."""
     model = get_model("spencer")
     inputs = device_inputs(0.006, n=3000, fs=3000.0)
     sim = simulate(model, inputs, model.theta("device"))

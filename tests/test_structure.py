@@ -234,7 +234,41 @@ def test_importing_the_package_leaves_the_matplotlib_backend_alone():
     env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
     proc = subprocess.run([sys.executable, "-c", _IMPORT_ALL, *MODULES], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=600)
+                          capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     culprits = proc.stdout.split()
     assert not culprits, f"importing {', '.join(culprits)} changed matplotlib's backend"
+
+
+# --- the contract lives in the project ----------------------------------------------------
+
+CONTRACT = ROOT / "docs" / "CONTRACT.md"
+
+
+def _project_text_files():
+    skip = {".git", ".venv", "results", "build", ".pytest_cache"}
+    for path in ROOT.rglob("*"):
+        rel = path.relative_to(ROOT)
+        if path.is_file() and not skip & set(rel.parts) and "golden" not in rel.parts and (
+                path.suffix in {".py", ".md", ".toml", ".cfg", ".txt"} or path.name in {"Makefile", "run"}):
+            yield rel, path
+
+
+def test_no_file_points_outside_the_repository():
+    """A clone needs nothing beside it: no doc or docstring sends the reader to ../shared."""
+    outside = [f"{rel}:{i}" for rel, path in _project_text_files()
+               if path != Path(__file__).resolve()  # this test names what it looks for
+               for i, line in enumerate(path.read_text(errors="replace").splitlines(), 1)
+               if "../shared" in line or "shared/SPEC" in line]
+    assert not outside, "references outside the repository: " + ", ".join(outside)
+
+
+def test_the_contract_names_every_model_effect_and_verb():
+    """docs/CONTRACT.md and the code agree on the fixed names (a new one must be documented)."""
+    from bayes_mr.cli import VERBS
+    from bayes_mr.models import EFFECTS, FORMS
+
+    text = CONTRACT.read_text()
+    missing = [name for name in (*FORMS, *EFFECTS, "none") if f"`{name}`" not in text]
+    missing += [f"bayes-mr {verb}" for verb in VERBS if f"bayes-mr {verb}" not in text]
+    assert not missing, f"not in docs/CONTRACT.md: {missing}"

@@ -1,4 +1,4 @@
-"""Model forms, effects and their composition (see ``../shared/SPEC.md``, Models/Effects)."""
+"""Model forms, effects and their composition (see ``docs/CONTRACT.md``, Models/Effects)."""
 
 from .effects import (
     ASYMMETRY,

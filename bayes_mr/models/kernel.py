@@ -15,7 +15,7 @@ Input row ``a`` (3,): structure ``[ẍ_g, 0, v]``; device ``[x, ẋ, v]``,
 linear in time between samples. ``p`` holds natural (SI) parameters.
 Time ``t`` is measured from the first sample.
 
-Equations are those of ``../shared/SPEC.md`` (thesis 3-31/32, 3-52..3-70,
+Equations are those of ``docs/CONTRACT.md`` (thesis 3-31/32, 3-52..3-70,
 Spencer et al. 1997) with ``|z|^{n-1} z`` written ``sgn(z)|z|^n``.
 """
 

@@ -409,7 +409,7 @@ def test_scorer_refuses_a_prediction_without_the_measured_channels():
 
 # --- the ukf engine of `bayes-mr fit` ----------------------------------------------------
 
-SPEC_FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
+CONTRACT_FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
                  "masked", "trained", "diverged", "wall_s"}
 
 
@@ -419,7 +419,7 @@ def test_ukf_fit_round_trips_with_the_spec_summary(dahl_a, dahl_b, tmp_path):
     path = results.save(idata, tmp_path / "fit.nc")
     back = results.load(path)
     summary = results.summary_of(back).to_dict()
-    assert SPEC_FIT_KEYS <= set(summary)
+    assert CONTRACT_FIT_KEYS <= set(summary)
     assert summary["engine"] == "ukf" and summary["model"] == "dahl" and summary["method"] == 2
     assert summary["trained"] + summary["diverged"] == 9 and summary["masked"] == 0
     assert set(summary["force_errors"]) == {"E_t", "E_x", "E_xdot"}
