@@ -10,29 +10,18 @@ from bayes_mr.cli import main
 from bayes_mr.compare import compare, crosscheck, selection_route
 from bayes_mr.identify import UKF, Emcee, Identify
 from bayes_mr.inference.mcmc import MCMCSettings
-from bayes_mr.models import get_model
-from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from records import offset_device_record
 
 FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
             "masked", "trained", "diverged", "wall_s"}
 SHORT = MCMCSettings(seed=0, progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)
 
 
-def device_record(duration, offset=-60.0, seed=3, fs=500.0):
-    """A Dahl device test with a force offset hidden in it (1 % noise)."""
-    model = get_model("dahl+force_offset")
-    sig = make_signal("blwn", duration=duration, fs=fs, amplitude=0.01, fmax=5.0, seed=seed)
-    theta = model.theta("device", {"c": 800.0, "k": 300.0, "F_d": 200.0, "sigma": 3000.0, "f0": offset})
-    return synthesize(model, theta, sig.time, sig.as_input("device"), noise=0.01, seed=seed + 1,
-                      source=f"dahl+force_offset-{seed}")
-
-
 @pytest.fixture(scope="module")
 def device_csv(tmp_path_factory):
     from bayes_mr.data import write_record
 
-    return write_record(device_record(4.0), tmp_path_factory.mktemp("cmp") / "dev.csv")
+    return write_record(offset_device_record(4.0), tmp_path_factory.mktemp("cmp") / "dev.csv")
 
 
 def test_selection_route_needs_every_model():
@@ -45,7 +34,7 @@ def test_selection_route_needs_every_model():
 
 def test_compare_selects_the_true_model_by_ti_with_mcmc_and_lsq():
     """Two models × lsq, mcmc: TI selects the model with the hidden offset; every row has the fit keys."""
-    rec = device_record(1.6, fs=250.0)
+    rec = offset_device_record(1.6, fs=250.0)
     out = compare(rec, ["dahl", "dahl+force_offset"], engines=("lsq", "mcmc"), progress=False,
                   estimators={"mcmc": Emcee(settings=SHORT)})
     assert len(out["rows"]) == 4 and all(FIT_KEYS <= set(r) for r in out["rows"])
@@ -66,7 +55,7 @@ def test_compare_selects_the_true_model_by_ti_with_mcmc_and_lsq():
 
 def test_crosscheck_of_ukf_and_mcmc_rows():
     """With both engines the comparison carries per-parameter z-scores of the UKF against the posterior."""
-    rec = device_record(2.0)
+    rec = offset_device_record(2.0)
     mc = Identify("dahl+force_offset", Emcee(settings=SHORT, evidence="laplace")).fit(rec, progress=False)
     uk = Identify("dahl+force_offset", UKF(n_lhs=2, taus=(0.01, 0.1))).fit(rec, progress=False)
     cc = crosscheck(uk, mc)

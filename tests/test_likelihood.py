@@ -5,17 +5,13 @@ import pytest
 from scipy.stats import norm
 
 from bayes_mr.likelihood import OutputError
-from bayes_mr.models import get_model
-from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from records import signal_record
 
 
 @pytest.fixture(scope="module")
 def masked_record():
-    sig = make_signal("blwn", duration=2.0, fs=200.0, amplitude=3e-3, fmax=10.0, seed=3)
-    m = get_model("dahl")
-    rec = synthesize(m, m.theta("structure", {}), sig.time, sig.as_input("structure"), mass=50.0,
-                     noise=0.02, seed=4, source="test: masked")
+    rec = signal_record("dahl", "structure", duration=2.0, fs=200.0, amplitude=3e-3, fmax=10.0, signal_seed=3,
+                        mass=50.0, noise=0.02, seed=4, source="test: masked")
     valid = np.ones(rec.sizes["time"], bool)
     valid[50:80] = False
     rec["valid"] = ("time", valid)

@@ -1,7 +1,7 @@
 """The compiled simulator against an independent high-accuracy integration.
 
-The reference right-hand sides below are written again from the contract's (docs/CONTRACT.md)
-equations in plain Python (not the kernel), and integrated with
+The reference right-hand sides below are written again from the equations of docs/CONTRACT.md
+in plain Python (not the kernel), and integrated with
 ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) sample interval by sample
 interval with the same linear-in-time input. Agreement to NRMSE ≤ 1e-3 checks
 both the equations and the RK4 sub-stepping.
@@ -14,7 +14,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, delay, simulate
+from bayes_mr.simulate import delay, simulate
+from records import device_inputs, structure_inputs
 
 
 def sgn(v):
@@ -22,7 +23,7 @@ def sgn(v):
 
 
 def hyst_rate(form, q, w, z):
-    """ż of the single-state forms, from the contract's table."""
+    """ż of the single-state forms, from the model table of docs/CONTRACT.md."""
     if form == "normalized-bouc-wen":
         return q["rho"] * (w - q["sigma"] * abs(w) * sgn(z) * abs(z) ** q["n"] + (q["sigma"] - 1) * w * abs(z) ** q["n"])
     if form == "dahl":
@@ -38,7 +39,7 @@ HYST_COEF = {"normalized-bouc-wen": "k_z", "dahl": "F_d", "lugre": "beta", "bouc
 
 
 def reference_rhs(model, kind, q, mass, t, s, x_in, v_in, volt, env):
-    """(ṡ, f_r, f_damper) written from the contract, independent of the kernel."""
+    """(ṡ, f_r, f_damper) written from docs/CONTRACT.md, independent of the kernel."""
     form = model.form.name
     effects = {e.name for e in model.effects}
     ds = np.zeros_like(s)
@@ -139,34 +140,6 @@ def reference_simulation(model, kind, theta, inputs):
     return np.array(out)
 
 
-def _excitation(n, dt, seed):
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * dt
-    freqs = rng.uniform(0.5, 6.0, 5)
-    amps = rng.uniform(0.3, 1.0, 5)
-    phases = rng.uniform(0, 2 * np.pi, 5)
-    x = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    xd = sum(a * 2 * np.pi * f * np.cos(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    xdd = -sum(a * (2 * np.pi * f) ** 2 * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
-    ramp = np.clip(t / 0.2, 0, 1)  # start from rest
-    return t, x * ramp, xd * ramp, xdd * ramp
-
-
-def _voltage(t):
-    return np.where(np.sin(2 * np.pi * 0.7 * t) > 0, 2.25, 0.0)
-
-
-def device_inputs(amplitude, n=1500, fs=1000.0, seed=0, voltage=True):
-    t, x, xd, _ = _excitation(n, 1 / fs, seed)
-    scale = amplitude / np.abs(x).max()
-    return Inputs.device(x * scale, xd * scale, 1 / fs, _voltage(t) if voltage else None)
-
-
-def structure_inputs(accel, mass, n=1500, fs=1000.0, seed=1, voltage=True):
-    t, _, _, xdd = _excitation(n, 1 / fs, seed)
-    return Inputs.structure(xdd * accel / np.abs(xdd).max(), 1 / fs, mass, _voltage(t) if voltage else None)
-
-
 THESIS_FRAME = dict(mass=50.0, accel=3.0)
 
 CASES = [
@@ -236,7 +209,7 @@ def test_stiff_dahl_needs_and_gets_substeps():
 
 
 def test_spencer_published_substeps_at_3khz():
-    """The contract's warning: published Spencer parameters need tens of sub-steps at 3 kHz."""
+    """The contract's warning (docs/CONTRACT.md): published Spencer parameters need tens of sub-steps at 3 kHz."""
     model = get_model("spencer")
     inputs = device_inputs(0.006, n=3000, fs=3000.0)
     sim = simulate(model, inputs, model.theta("device"))

@@ -1,7 +1,7 @@
 """The one record schema every source is read into.
 
 A *record* is an :class:`xarray.Dataset` with one dimension, ``time``, and
-these conventions (SI units throughout, see ``docs/CONTRACT.md`` "Data"):
+these conventions (SI units throughout, see ``docs/CONTRACT.md`` "Records"):
 
 * coordinate ``time`` [s], uniformly sampled, first sample = start of the test;
 * data variables, float64 on ``time``, each with an ``attrs["units"]``:

@@ -160,8 +160,8 @@ def test_walker_count_rules():
 # --- the package's posterior and its results -------------------------------------------
 
 def test_fit_mcmc_result_in_the_package_schema(tmp_path):
-    """A short dahl posterior → InferenceData with every group, SPEC summary keys, and a netCDF round trip."""
-    from test_ukf import structure_record
+    """A short dahl posterior → InferenceData with every group, the contract's fit keys, and a netCDF round trip."""
+    from records import structure_record
 
     from bayes_mr import results
     from bayes_mr.inference.evidence import laplace_evidence

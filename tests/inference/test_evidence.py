@@ -4,8 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from test_simulate import device_inputs
-from test_ukf import structure_record
 
 from bayes_mr.data.schema import make_record
 from bayes_mr.inference import ukf
@@ -25,6 +23,7 @@ from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, sample
 from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulate import simulate
+from records import device_inputs, structure_record
 
 
 def within(ev: Evidence, truth: float, k: float = 3.0) -> bool:

@@ -6,16 +6,15 @@ import pytest
 from bayes_mr.data import load_packaged
 from bayes_mr.data.virtual_table import implied_damper_force, virtual_shake_table
 from bayes_mr.models import get_model
-from bayes_mr.signals import make_signal
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulate import Inputs, simulate
+from records import signal_record
 
 
 def test_frame_driven_by_the_virtual_table_follows_the_damper_motion():
     """Simulate a Dahl damper test, build the table, and drive frame + damper with it."""
-    sig = make_signal("blwn", duration=6.0, fs=2000.0, amplitude=0.03, fmax=8.0, seed=4)
     damper = get_model("dahl")
     values = dict(c=800.0, k=300.0, F_d=200.0, sigma=3000.0)
-    dev = synthesize(damper, damper.theta("device", values), sig.time, sig.as_input("device"), noise=0.0)
+    dev = signal_record(damper, "device", values, duration=6.0, fs=2000.0, amplitude=0.03, fmax=8.0, signal_seed=4)
     frame = dict(mass=27.0, k=25_000.0, c=100.0)
     table = virtual_shake_table(dev, **frame)
     assert table.attrs["kind"] == "structure"

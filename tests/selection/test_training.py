@@ -24,7 +24,7 @@ from bayes_mr.inference.ukf_training import concat_records, train
 from bayes_mr.inference.ukf_validation import validate_runs
 from bayes_mr.scores import score
 from bayes_mr.selection import Trial, best_trial, method1, method2, method3
-from test_ukf import structure_record
+from records import signal_record, structure_record
 
 # few priors (3 LHS × 3 τ) on short records keep the file fast; the τ are thesis values
 SMALL = dict(n_lhs=3, taus=(0.01, 0.1, 0.5), progress=False)
@@ -323,13 +323,11 @@ def test_method3_trains_on_both_and_validates_on_both(dahl_a, dahl_b):
 def test_method1_on_a_device_test():
     """The damper alone under band-limited motion: force is the measured channel."""
     from bayes_mr.models import get_model
-    from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
 
     model = get_model("dahl")
     theta = model.theta("device", {})
-    sig = make_signal("blwn", duration=6.0, fs=1000.0, amplitude=3e-3, fmax=10.0, seed=1)
-    rec = synthesize(model, theta, sig.time, sig.as_input("device"), noise=0.01, seed=1, source="device")
+    rec = signal_record(model, "device", duration=6.0, fs=1000.0, amplitude=3e-3, fmax=10.0, signal_seed=1,
+                        noise=0.01, seed=1, source="device")
     trial = method1(model, rec, seed=0, **SMALL)
     assert trial.training.attrs["kind"] == "device"
     assert np.max(np.abs(_rel(trial, theta))) < 0.05
@@ -413,7 +411,7 @@ def test_scorer_refuses_a_prediction_without_the_measured_channels():
 
 # --- the ukf engine of `bayes-mr fit` ----------------------------------------------------
 
-SPEC_FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
+CONTRACT_FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
                  "masked", "trained", "diverged", "wall_s"}
 
 
@@ -423,7 +421,7 @@ def test_ukf_fit_round_trips_with_the_spec_summary(dahl_a, dahl_b, tmp_path):
     path = results.save(idata, tmp_path / "fit.nc")
     back = results.load_result(path)
     summary = results.summary_of(back).to_dict()
-    assert SPEC_FIT_KEYS <= set(summary)
+    assert CONTRACT_FIT_KEYS <= set(summary)
     assert summary["engine"] == "ukf" and summary["model"] == "dahl" and summary["method"] == 2
     assert summary["trained"] + summary["diverged"] == 9 and summary["masked"] == 0
     assert set(summary["force_errors"]) == {"E_t", "E_x", "E_xdot"}

@@ -4,14 +4,13 @@ import math
 
 import numpy as np
 import pytest
-from test_simulate import device_inputs
-from test_ukf import structure_record
 
 from bayes_mr.data.schema import make_record
 from bayes_mr.inference.lsq import LinearSubfit, LSQSettings, fit_lsq, linear_names
 from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulate import simulate
+from records import device_inputs, structure_record
 
 STRUCTURE_CASES = [
     ("dahl", {}),

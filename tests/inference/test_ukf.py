@@ -13,39 +13,7 @@ from bayes_mr.inference import ukf_kernel as K
 from bayes_mr.inference.sigma import MerweScaled
 from bayes_mr.models import get_model
 from bayes_mr.simulate import Inputs, simulate
-
-
-def blwn_ground(n, fs, seed, rms=1.0, band=8.0):
-    """Band-limited random ground acceleration, starting from rest."""
-    from scipy.signal import butter, sosfiltfilt
-
-    rng = np.random.default_rng(seed)
-    sos = butter(4, band, fs=fs, output="sos")
-    ag = sosfiltfilt(sos, rng.standard_normal(n))
-    ag *= rms / ag.std()
-    ag *= np.clip(np.arange(n) / (0.2 * fs), 0, 1)
-    return ag
-
-
-def structure_record(model, values, *, n=6000, fs=1000.0, mass=50.0, noise=0.01, seed=0, rms=3.0, process=True):
-    """Simulated structure test with noise on the outputs and (``process``) on the input."""
-    model = get_model(model)
-    rng = np.random.default_rng(seed + 1000)
-    ag = blwn_ground(n, fs, seed, rms=rms)
-    theta = model.theta("structure", values)
-    sd_ag = noise * ag.std() if process else 0.0
-    sim = simulate(model, Inputs.structure(ag + sd_ag * rng.standard_normal(n), 1 / fs, mass), theta)
-    x, a = sim["displacement"], sim["acceleration"]
-    sd_x, sd_a = noise * x.std(), noise * a.std()
-    rec = make_record(
-        np.arange(n) / fs,
-        dict(ground_acceleration=ag, displacement=x + sd_x * rng.standard_normal(n),
-             acceleration=a + sd_a * rng.standard_normal(n), force=sim["force"]),
-        mass=mass, source="test",
-        attrs=dict(noise_sd_displacement=sd_x, noise_sd_acceleration=sd_a,
-                   noise_sd_ground_acceleration=sd_ag if process else 1e-6 * ag.std()),
-    )
-    return rec, theta
+from records import structure_record
 
 
 # --- exactness on a linear-Gaussian model ---------------------------------------

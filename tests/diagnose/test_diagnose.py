@@ -22,6 +22,7 @@ from bayes_mr.stats import integrated_time
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import synthesize
+from records import signal_record
 
 MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
 VOCABULARY = set(EFFECTS) | {NONE}
@@ -213,9 +214,8 @@ def test_hidden_effect_is_named_and_fixed_full_matrix(case):
 
 def test_delay_of_the_displacement_channel_names_that_channel():
     model = Model(get_model("dahl").form, (EFFECTS["sensor_delay"].with_options(channel="displacement"),))
-    sig = make_signal("blwn", duration=6.0, fs=500.0, amplitude=3e-3, fmax=10.0, seed=4)
-    rec = synthesize(model, model.theta("structure", {"delay": 0.006}), sig.time, sig.as_input("structure"),
-                     mass=MASS, noise=0.01, seed=81)
+    rec = signal_record(model, "structure", {"delay": 0.006}, duration=6.0, fs=500.0, amplitude=3e-3, fmax=10.0,
+                        signal_seed=4, mass=MASS, noise=0.01, seed=81)
     out = diagnose(rec, "dahl", progress=False)
     check_named(out, "sensor_delay")
     assert out["extended"]["options"]["sensor_delay"]["channel"] == "displacement"

@@ -20,7 +20,7 @@ from bayes_mr.data.quality import apply_quality
 from bayes_mr.data.schema import MIN_SAMPLES, RecordError, make_record
 from bayes_mr.data.units import UnitWarning, parse_unit_options
 
-RAW_NEES = Path(__file__).resolve().parents[2] / "shared" / "data" / "nees-mr-damper" / "ranran_50.csv.gz"
+RAW_NEES = Path(__file__).resolve().parents[3] / "shared" / "data" / "nees-mr-damper" / "ranran_50.csv.gz"
 FS = 1000.0
 N = 600
 

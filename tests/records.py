@@ -1,0 +1,174 @@
+"""Record recipes shared by the test folders (one place instead of one copy per file).
+
+Each recipe is deterministic in its arguments (seeds included), so a test that
+switched from its own copy to these gets the same record, bit for bit. The
+builders are plain functions because several tests call them at module level
+(parametrised cases, module-scoped fixtures); ``tests/conftest.py`` also hands
+them out as fixtures. ``pyproject.toml`` puts ``tests/`` on ``sys.path``
+(``[tool.pytest.ini_options] pythonpath``) so that ``from records import ...``
+works from every sub-folder.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+from bayes_mr.data.schema import make_record
+from bayes_mr.models import get_model
+from bayes_mr.signals import make_signal
+from bayes_mr.simulate import Inputs, simulate, synthesize
+
+# --- ground and imposed motions --------------------------------------------------------
+
+
+def blwn_ground(n: int, fs: float, seed: int, rms: float = 1.0, band: float = 8.0) -> np.ndarray:
+    """Band-limited random ground acceleration [m/s²], starting from rest.
+
+    Parameters
+    ----------
+    n : int
+        Samples.
+    fs : float
+        Sampling rate [Hz].
+    seed : int
+        Seed of the white noise.
+    rms : float
+        RMS of the result [m/s²] (before the 0.2 s start-up ramp).
+    band : float
+        Low-pass corner of the 4th-order zero-phase Butterworth filter [Hz].
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    rng = np.random.default_rng(seed)
+    sos = butter(4, band, fs=fs, output="sos")
+    ag = sosfiltfilt(sos, rng.standard_normal(n))
+    ag *= rms / ag.std()
+    ag *= np.clip(np.arange(n) / (0.2 * fs), 0, 1)
+    return ag
+
+
+def _excitation(n: int, dt: float, seed: int):
+    """Five random sines (0.5–6 Hz) and their derivatives, ramped in over 0.2 s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    freqs = rng.uniform(0.5, 6.0, 5)
+    amps = rng.uniform(0.3, 1.0, 5)
+    phases = rng.uniform(0, 2 * np.pi, 5)
+    x = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
+    xd = sum(a * 2 * np.pi * f * np.cos(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
+    xdd = -sum(a * (2 * np.pi * f) ** 2 * np.sin(2 * np.pi * f * t + p) for a, f, p in zip(amps, freqs, phases))
+    ramp = np.clip(t / 0.2, 0, 1)  # start from rest
+    return t, x * ramp, xd * ramp, xdd * ramp
+
+
+def _voltage(t: np.ndarray) -> np.ndarray:
+    """A 0 / 2.25 V square wave at 0.7 Hz [V]."""
+    return np.where(np.sin(2 * np.pi * 0.7 * t) > 0, 2.25, 0.0)
+
+
+def device_inputs(amplitude: float, n: int = 1500, fs: float = 1000.0, seed: int = 0, voltage: bool = True) -> Inputs:
+    """Imposed damper motion (five sines) with peak ``amplitude`` [m] and, optionally, a square-wave voltage."""
+    t, x, xd, _ = _excitation(n, 1 / fs, seed)
+    scale = amplitude / np.abs(x).max()
+    return Inputs.device(x * scale, xd * scale, 1 / fs, _voltage(t) if voltage else None)
+
+
+def structure_inputs(accel: float, mass: float, n: int = 1500, fs: float = 1000.0, seed: int = 1,
+                     voltage: bool = True) -> Inputs:
+    """Ground acceleration (five sines) with peak ``accel`` [m/s²] under a storey of ``mass`` [kg]."""
+    t, _, _, xdd = _excitation(n, 1 / fs, seed)
+    return Inputs.structure(xdd * accel / np.abs(xdd).max(), 1 / fs, mass, _voltage(t) if voltage else None)
+
+
+# --- whole records ---------------------------------------------------------------------
+
+
+def structure_record(model, values, *, n=6000, fs=1000.0, mass=50.0, noise=0.01, seed=0, rms=3.0, process=True):
+    """Simulated structure test with noise on the outputs and (``process``) on the input.
+
+    Parameters
+    ----------
+    model : str
+        Model name (``dahl``, ``lugre``, ...).
+    values : dict
+        Parameter overrides [SI]; the rest take the model's defaults.
+    n, fs : int, float
+        Samples and sampling rate [Hz].
+    mass : float
+        Storey mass [kg].
+    noise : float
+        Noise SD as a fraction of each channel's SD.
+    seed : int
+        Seed of the ground motion (``seed``) and of the noise (``seed + 1000``).
+    rms : float
+        RMS ground acceleration [m/s²].
+    process : bool
+        Also put noise on the ground acceleration fed to the simulation.
+
+    Returns
+    -------
+    (xarray.Dataset, ndarray)
+        The record and the true θ [SI].
+    """
+    model = get_model(model)
+    rng = np.random.default_rng(seed + 1000)
+    ag = blwn_ground(n, fs, seed, rms=rms)
+    theta = model.theta("structure", values)
+    sd_ag = noise * ag.std() if process else 0.0
+    sim = simulate(model, Inputs.structure(ag + sd_ag * rng.standard_normal(n), 1 / fs, mass), theta)
+    x, a = sim["displacement"], sim["acceleration"]
+    sd_x, sd_a = noise * x.std(), noise * a.std()
+    rec = make_record(
+        np.arange(n) / fs,
+        dict(ground_acceleration=ag, displacement=x + sd_x * rng.standard_normal(n),
+             acceleration=a + sd_a * rng.standard_normal(n), force=sim["force"]),
+        mass=mass, source="test",
+        attrs=dict(noise_sd_displacement=sd_x, noise_sd_acceleration=sd_a,
+                   noise_sd_ground_acceleration=sd_ag if process else 1e-6 * ag.std()),
+    )
+    return rec, theta
+
+
+def signal_record(model, kind: str, values: dict | None = None, *, signal: str = "blwn", signal_seed: int | None = None,
+                  mass: float | None = None, noise: float = 0.0, seed=None, source: str = "simulate",
+                  **signal_options) -> xr.Dataset:
+    """A test record of ``model`` driven by a named signal: ``make_signal`` then ``synthesize``.
+
+    Parameters
+    ----------
+    model : str or Model
+        Model name (``dahl+force_offset``, ...) or a :class:`~bayes_mr.models.Model`.
+    kind : {"structure", "device"}
+    values : dict, optional
+        Parameter overrides [SI].
+    signal : str
+        Signal name of :func:`bayes_mr.signals.make_signal`.
+    signal_seed : int, optional
+        Seed of a random signal (``make_signal(seed=...)``); omitted when None.
+    mass : float, optional
+        Storey mass [kg] (structure tests).
+    noise : float
+        Noise SD as a fraction of each channel's RMS (``synthesize(noise=...)``).
+    seed : int, optional
+        Seed of the noise (``synthesize(seed=...)``).
+    source : str
+        The record's ``source`` attribute.
+    **signal_options
+        ``duration`` [s], ``fs`` [Hz], ``amplitude``, ``fmax`` [Hz], ``scale`` of ``make_signal``.
+    """
+    model = get_model(model) if isinstance(model, str) else model
+    if signal_seed is not None:
+        signal_options["seed"] = signal_seed
+    sig = make_signal(signal, **signal_options)
+    return synthesize(model, model.theta(kind, values or {}), sig.time, sig.as_input(kind), mass=mass, noise=noise,
+                      seed=seed, source=source)
+
+
+def offset_device_record(duration: float, offset: float = -60.0, seed: int = 3, fs: float = 500.0) -> xr.Dataset:
+    """A Dahl device test with a force offset ``offset`` [N] hidden in it (1 % noise)."""
+    return signal_record(
+        "dahl+force_offset", "device", {"c": 800.0, "k": 300.0, "F_d": 200.0, "sigma": 3000.0, "f0": offset},
+        duration=duration, fs=fs, amplitude=0.01, fmax=5.0, signal_seed=seed, noise=0.01, seed=seed + 1,
+        source=f"dahl+force_offset-{seed}",
+    )
