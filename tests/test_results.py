@@ -80,8 +80,8 @@ def test_json_has_no_nan_and_is_written_whole(tmp_path):
 
 def test_load_refuses_what_is_not_a_result(tmp_path):
     with pytest.raises(FileNotFoundError, match="bayes-mr fit"):
-        results.load(tmp_path / "missing.nc")
+        results.load_result(tmp_path / "missing.nc")
     other = tmp_path / "other.nc"
     xr.Dataset({"x": ("t", np.arange(3.0))}).to_netcdf(other)
     with pytest.raises(ValueError, match="not a bayes_mr result"):
-        results.load(other)
+        results.load_result(other)

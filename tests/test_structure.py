@@ -130,8 +130,6 @@ def test_the_cycle_finder_finds_a_cycle():
     assert _cycles({"a": {"b", "c"}, "b": {"c"}, "c": set()}) == []
 
 
-@pytest.mark.xfail(strict=False, reason="cycles being removed in issue 12 (data/io↔data/noise, "
-                                        "inference/evidence↔inference/mcmc, models/forms↔models/model)")
 def test_no_import_cycle():
     cycles = _cycles(GRAPH)
     assert not cycles, "import cycles: " + "; ".join(" ↔ ".join(c) for c in cycles)
