@@ -320,8 +320,7 @@ def _simulate_parser(sub, forms: str, effects: str) -> None:
     p.add_argument("--current", type=float, help="constant command current [A] (instead of --voltage)")
     p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests); a forced test's known mass "
                                               "(written to the record; else its parameter m is left to fit)")
-    p.add_argument("--outputs", metavar="A,B", help="structure and forced tests: the measured outputs to write "
-                                                    "(e.g. acceleration; default all)")
+    p.add_argument("--outputs", metavar="A,B", help="structure/forced tests: the outputs to write (default all)")
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT", help="units of --input columns")
     p.add_argument("--noise", type=float, default=0.0,
                    help="noise as a fraction of each channel's RMS on input and outputs (0.01 = 1 %%)")

@@ -294,12 +294,7 @@ def synthesize(
              "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
     channels, sds, sim = _measure(model, theta, kind, inputs, dt, mass, noisy)
     if outputs is not None:
-        drop = [c for c in OUTPUTS[kind] if c not in outputs]
-        unknown = [c for c in outputs if c not in OUTPUTS[kind]]
-        if unknown or kind == "device":
-            raise ValueError(f"outputs {unknown or outputs}: a {kind} test measures {', '.join(OUTPUTS[kind])}")
-        channels = {c: v for c, v in channels.items() if c not in drop}
-        sds = {c: v for c, v in sds.items() if c not in drop}
+        channels, sds = _keep_outputs(kind, outputs, channels, sds, OUTPUTS[kind])
     attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
     for name in COMMANDS:
         if inputs.get(name) is not None:
@@ -308,6 +303,15 @@ def synthesize(
         raise ValueError(f"the simulation of {model.name} diverged at sample {int(sim.failed[0])}: "
                          "check the parameters (a stiffer law may need a higher sampling rate)")
     return make_record(time, channels, kind=kind, mass=mass, source=source, attrs=attrs)
+
+
+def _keep_outputs(kind: str, outputs, channels: dict, sds: dict, possible: tuple[str, ...]):
+    """The channels and noise SDs without the outputs a partial record does not measure."""
+    drop = [c for c in possible if c not in outputs]
+    unknown = [c for c in outputs if c not in possible]
+    if unknown or kind == "device":
+        raise ValueError(f"outputs {unknown or outputs}: a {kind} test measures {', '.join(possible)}")
+    return ({c: v for c, v in channels.items() if c not in drop}, {c: v for c, v in sds.items() if c not in drop})
 
 
 def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float | None):

@@ -157,6 +157,29 @@ class Where:
         return RecordError(" ".join(msg.split()))  # always one line
 
 
+def _check_channels(kind: str, channels, source: str) -> None:
+    """Required columns present, no unknown one, at least one output, one command at most."""
+    for name in REQUIRED[kind]:
+        if name not in channels:
+            raise Where(source, name).error(
+                f"missing column for a {kind} test",
+                f"a {kind} test needs columns time, {', '.join(REQUIRED[kind])}",
+            )
+    for name in channels:
+        if name not in UNITS:
+            known = ", ".join(REQUIRED[kind] + OPTIONAL[kind])
+            raise Where(source, name).error("unknown column", f"valid columns: time, {known}")
+    measured = [c for c in OUTPUTS[kind] if c in channels]
+    if not measured:
+        raise Where(source, OUTPUTS[kind][0]).error(
+            f"no output column for a {kind} test",
+            f"a {kind} test measures at least one of {', '.join(OUTPUTS[kind])}",
+        )
+    if sum(c in channels for c in COMMANDS) > 1:
+        raise Where(source, "current").error("a record has voltage or current as the damper command, not both",
+                                             "drop one of the two columns")
+
+
 def make_record(
     time: np.ndarray,
     channels: dict[str, np.ndarray],
@@ -196,25 +219,7 @@ def make_record(
     where = Where(source)
     if kind not in KINDS:
         raise ValueError(f"unknown kind of test '{kind}'; valid: {', '.join(KINDS)}")
-    for name in REQUIRED[kind]:
-        if name not in channels:
-            raise Where(source, name).error(
-                f"missing column for a {kind} test",
-                f"a {kind} test needs columns time, {', '.join(REQUIRED[kind])}",
-            )
-    for name in channels:
-        if name not in UNITS:
-            known = ", ".join(REQUIRED[kind] + OPTIONAL[kind])
-            raise Where(source, name).error("unknown column", f"valid columns: time, {known}")
-    measured = [c for c in OUTPUTS[kind] if c in channels]
-    if not measured:
-        raise Where(source, OUTPUTS[kind][0]).error(
-            f"no output column for a {kind} test",
-            f"a {kind} test measures at least one of {', '.join(OUTPUTS[kind])}",
-        )
-    if sum(c in channels for c in COMMANDS) > 1:
-        raise Where(source, "current").error("a record has voltage or current as the damper command, not both",
-                                             "drop one of the two columns")
+    _check_channels(kind, channels, source)
     check_mass(kind, mass, source)
     if time.size < MIN_SAMPLES:
         raise where.error(
