@@ -79,7 +79,6 @@ def _write_json(data: dict, path: str | None) -> None:
 def cmd_simulate(args) -> int:
     from .data import read_inputs, write_record
     from .models import EFFECTS, get_model
-    from .signals import make_signal
     from .simulate import synthesize
 
     model = get_model(args.model)
@@ -101,24 +100,48 @@ def cmd_simulate(args) -> int:
         source = f"simulate {model.name} --input {args.input}"
     elif args.signal:
         kind = args.kind or ("structure" if args.mass else "device")
-        opts = {k: getattr(args, k) for k in ("duration", "fs", "amplitude", "fmax", "scale") if getattr(args, k) is not None}
-        sig = make_signal(args.signal, seed=args.seed, **opts)
-        time = sig.time
-        inputs = sig.as_input(kind)
+        time, inputs = _signal_inputs(args, kind, params)
         source = f"simulate {model.name} --signal {args.signal}"
     else:
         raise CLIError("give the input: --input CSV or --signal NAME (see --help)")
-    if kind == "structure" and not args.mass:
-        raise CLIError("a structure test needs the storey mass: pass --mass KG")
-    if args.voltage is not None and "voltage" not in inputs:
-        inputs["voltage"] = np.full(time.size, args.voltage)
+    _simulate_checks(args, kind, params)
+    for name, value in (("voltage", args.voltage), ("current", args.current)):
+        if value is not None and not any(c in inputs for c in ("voltage", "current")):
+            inputs[name] = np.full(time.size, value)
     theta = model.theta(kind, params)
-    rec = synthesize(model, theta, time, inputs, mass=args.mass if kind == "structure" else None,
-                     noise=args.noise, seed=args.seed, source=source)
+    outputs = tuple(c.strip() for c in args.outputs.split(",") if c.strip()) if args.outputs else None
+    rec = synthesize(model, theta, time, inputs, mass=args.mass if kind != "device" else None,
+                     noise=args.noise, seed=args.seed, source=source, outputs=outputs)
     path = write_record(rec, args.output)
     print(f"wrote {path}: {kind} test, {rec.sizes['time']} samples at {rec.attrs['fs']:.6g} Hz, model {model.name}",
           file=sys.stderr)
     return 0
+
+
+def _signal_inputs(args, kind: str, params: dict) -> tuple[np.ndarray, dict]:
+    """Time and input channels of ``--signal``: a forced test is pushed by m × the signal's acceleration."""
+    from .signals import make_signal
+
+    opts = {k: getattr(args, k) for k in ("duration", "fs", "amplitude", "fmax", "scale") if getattr(args, k) is not None}
+    sig = make_signal(args.signal, seed=args.seed, **opts)
+    if kind == "forced":
+        m = args.mass or params.get("m", 1.0)
+        return sig.time, {"applied_force": float(m) * sig.acceleration}
+    return sig.time, sig.as_input(kind)
+
+
+def _simulate_checks(args, kind: str, params: dict) -> None:
+    """The mass and command options make sense for ``kind`` (a forced test's --mass sets its parameter m)."""
+    if kind == "structure" and not args.mass:
+        raise CLIError("a structure test needs the storey mass: pass --mass KG")
+    if args.mass is not None and not args.mass > 0:
+        raise CLIError(f"--mass {args.mass}: the mass must be positive [kg]")
+    if kind == "forced" and args.mass is not None:
+        if "m" in params and params["m"] != args.mass:
+            raise CLIError("give the mass once: --mass KG or --param m=KG")
+        params["m"] = args.mass
+    if args.voltage is not None and args.current is not None:
+        raise CLIError("the damper command is --voltage or --current, not both")
 
 
 def cmd_fit(args) -> int:
@@ -148,7 +171,7 @@ def cmd_validate(args) -> int:
 
     idata = results.load_result(args.result)
     rec = _read(args.data, args)
-    _write_json(validate(idata, rec), args.json)
+    _write_json(validate(idata, rec, warmup=args.warmup), args.json)
     return 0
 
 
@@ -247,7 +270,8 @@ VERBS = {
 
 
 def _common_data_flags(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests; or a netCDF 'mass' attribute)")
+    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests; or a netCDF 'mass' attribute); "
+                                              "a forced test's known mass (else its parameter m is estimated)")
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT",
                    help="unit of a column whose header has none, e.g. displacement=cm (cm, mm, g, kN, …)")
     p.add_argument("--no-quality", action="store_true",
@@ -284,15 +308,19 @@ def _simulate_parser(sub, forms: str, effects: str) -> None:
     src.add_argument("--input", metavar="CSV", help="CSV with time and ground_acceleration (or displacement)")
     src.add_argument("--signal", metavar="NAME", help="a thesis signal: blwn, amp-sweep-up-down, amp-sweep-up, "
                                                      "freq-sweep-up, freq-sweep-up-down, step, elcentro, loma-prieta")
-    p.add_argument("--kind", choices=("structure", "device"),
-                   help="with --signal: drive a frame (needs --mass) or the damper alone (default: structure if --mass)")
+    p.add_argument("--kind", choices=("structure", "device", "forced"),
+                   help="with --signal: drive a frame (needs --mass), the damper alone, or a mass by a force "
+                        "(forced: applied_force = m × the signal's acceleration) (default: structure if --mass)")
     p.add_argument("--duration", type=float, help="signal length [s]")
     p.add_argument("--fs", type=float, help="sampling rate [Hz]")
     p.add_argument("--amplitude", type=float, help="signal amplitude [m]")
     p.add_argument("--fmax", type=float, help="signal frequency limit [Hz]")
     p.add_argument("--scale", type=float, help="earthquake scale factor")
     p.add_argument("--voltage", type=float, help="constant command voltage [V]")
-    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests)")
+    p.add_argument("--current", type=float, help="constant command current [A] (instead of --voltage)")
+    p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests); a forced test's known mass "
+                                              "(written to the record; else its parameter m is left to fit)")
+    p.add_argument("--outputs", metavar="A,B", help="structure/forced tests: the outputs to write (default all)")
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT", help="units of --input columns")
     p.add_argument("--noise", type=float, default=0.0,
                    help="noise as a fraction of each channel's RMS on input and outputs (0.01 = 1 %%)")
@@ -320,6 +348,8 @@ def _fit_parsers(sub, forms: str) -> None:
     p.add_argument("result", help="RESULT.nc written by fit -o")
     p.add_argument("data", help="the other record")
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
+    p.add_argument("--warmup", type=float, default=0.0, metavar="SECONDS",
+                   help="simulate the first SECONDS but do not score them (transients, steady-state multisines)")
     _common_data_flags(p)
 
 

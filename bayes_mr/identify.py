@@ -84,23 +84,56 @@ class Identify:
         return idata
 
 
-def validate(idata, record: xr.Dataset) -> dict:
+def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
     """Thesis method 2: a fitted model predicts another record.
 
-    Returns the ``fit`` JSON keys for the new record: the fitted parameters,
-    and the scores of the point estimate's prediction.
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        A fit (:meth:`Identify.fit` or ``bayes-mr fit -o``).
+    record : xarray.Dataset
+        The other record, of the same kind.
+    warmup : float
+        Seconds at the start that are simulated (from rest, as always) but
+        not scored: the transient of a steady-state multisine, or one the
+        model does not describe.
+
+    Returns
+    -------
+    dict
+        The ``fit`` JSON keys for the new record: the fitted parameters, the
+        scores of the point estimate's prediction over the scored samples
+        (``mse`` over ``mse_channels``, ``rmse`` per measured channel [SI]),
+        and ``warmup_s``.
     """
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
         raise ValueError(f"the result is a {summary.kind} test, the record a {record.attrs['kind']} test")
+    if not (np.isfinite(warmup) and warmup >= 0):
+        raise ValueError(f"warmup must be a non-negative number of seconds, got {warmup}")
     t0 = _time.perf_counter()
     pred = predict(summary.model, record, results.point_of(idata))
-    scores = score(record, pred)
+    scores = score(_after(record, warmup), pred)
     out = summary.to_dict()
     out.update(
-        mse=scores["mse"], force_errors=scores["force_errors"], force_nrmse=scores["force_nrmse"],
-        rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)), wall_s=_time.perf_counter() - t0,
+        mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
+        force_nrmse=scores["force_nrmse"], rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)),
+        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0,
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )
+    return out
+
+
+def _after(record: xr.Dataset, warmup: float) -> xr.Dataset:
+    """The record with samples in its first ``warmup`` seconds left out of every score (``valid`` False)."""
+    if warmup == 0:
+        return record
+    time = record["time"].values
+    keep = time - time[0] >= warmup
+    if not keep.any():
+        raise ValueError(f"warmup {warmup} s is longer than the record ({time[-1] - time[0]:.6g} s)")
+    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(time.size, bool)
+    out = record.copy()
+    out["valid"] = ("time", valid & keep, record["valid"].attrs if "valid" in record else {})
     return out

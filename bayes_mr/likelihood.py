@@ -1,8 +1,9 @@
 """One place that turns (model, record) into a log-density of θ.
 
 The output-error likelihood: the model is simulated from rest under the
-record's inputs and compared with the measured channels (structure test:
-displacement and absolute acceleration; device test: force), with
+record's inputs and compared with the measured channels (``channels``: those
+the record has of structure test: displacement and absolute acceleration;
+forced test: displacement, velocity, acceleration; device test: force), with
 independent Gaussian errors of standard deviation σ_c per channel, over the
 samples quality control left valid:
 
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .data.schema import OUTPUTS
+from .data.schema import outputs_of
 from .models import Model, Scales, get_model
 from .models.params import Coordinates
 from .simulate import Inputs, Simulation, simulate
@@ -38,7 +39,16 @@ SIGMA_SPAN = (1e-4, 1.0)
 
 
 def record_scales(record: xr.Dataset) -> Scales:
-    """Force, displacement and velocity amplitudes of a record (robust peaks)."""
+    """Force, displacement and velocity amplitudes of a record (robust peaks), from what it measures.
+
+    A channel the record lacks is reached from the nearest one it has: by
+    differentiation (displacement → velocity → acceleration), or by dividing
+    by the acceleration's (velocity's) dominant angular frequency ω_c (the
+    amplitude-weighted median of its spectrum) — so an accelerometer-only
+    record gets X ≈ A/ω_c², V ≈ A/ω_c. The force scale is the damper force
+    (device), m × peak absolute acceleration (structure), or the peak applied
+    force (forced). These are prior scales: a factor of two does not matter.
+    """
     valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(record.sizes["time"], bool)
 
     def peak(values):
@@ -46,19 +56,60 @@ def record_scales(record: xr.Dataset) -> Scales:
         return float(np.percentile(np.abs(v - np.median(v)), 99))
 
     dt = float(record.attrs["dt"])
-    x = peak(record["displacement"].values)
-    if record.attrs["kind"] == "structure":
-        f = float(record.attrs["mass"]) * peak(record["acceleration"].values)
-        v = peak(np.gradient(record["displacement"].values, dt))
-    else:
+    kind = record.attrs["kind"]
+    if kind == "device":
+        x = peak(record["displacement"].values)
         f = peak(record["force"].values)
         v = peak(record["velocity"].values) if "velocity" in record else peak(
             np.gradient(record["displacement"].values, dt))
+    else:
+        x, v, acc = _motion_peaks(record, peak, dt)
+        if kind == "structure":
+            f = float(record.attrs["mass"]) * acc
+        else:
+            f = peak(record["applied_force"].values)
     duration = dt * record.sizes["time"]
     for name, value in (("force", f), ("displacement", x), ("velocity", v)):
         if not value > 0:
             raise ValueError(f"{record.attrs.get('source', 'record')}: {name} amplitude is zero — nothing to identify")
     return Scales(force=f, displacement=x, velocity=v, duration=duration)
+
+
+def _motion_peaks(record: xr.Dataset, peak, dt: float) -> tuple[float, float, float]:
+    """Peaks of displacement, velocity and absolute acceleration of a structure or forced test."""
+    x = record["displacement"].values if "displacement" in record else None
+    v = record["velocity"].values if "velocity" in record else None
+    if "acceleration" in record:
+        a = record["acceleration"].values
+        # a structure test's motion is relative: the accelerometer reads ẍ + ẍ_g
+        rel = a - record["ground_acceleration"].values if record.attrs["kind"] == "structure" else a
+    else:
+        rel = None
+    if x is None and v is None:
+        w = _dominant_omega(rel, dt)
+        return peak(rel) / w**2, peak(rel) / w, peak(a)
+    if x is None:
+        w = _dominant_omega(v, dt)
+        x_pk, v_pk = peak(v) / w, peak(v)
+    else:
+        v_pk = peak(v) if v is not None else peak(np.gradient(x, dt))
+        x_pk = peak(x)
+    if rel is not None:
+        return x_pk, v_pk, peak(a)
+    base = record["ground_acceleration"].values if record.attrs["kind"] == "structure" else 0.0
+    xdd = np.gradient(v, dt) if v is not None else np.gradient(np.gradient(x, dt), dt)
+    return x_pk, v_pk, peak(xdd + base)
+
+
+def _dominant_omega(y: np.ndarray, dt: float) -> float:
+    """Amplitude-weighted median angular frequency [rad/s] of ``y``'s spectrum (the mean removed)."""
+    amp = np.abs(np.fft.rfft(y - np.mean(y)))
+    f = np.fft.rfftfreq(y.size, dt)
+    amp[0] = 0.0
+    c = np.cumsum(amp)
+    if not c[-1] > 0:
+        return 2 * np.pi * f[1]
+    return 2 * np.pi * max(float(f[np.searchsorted(c, 0.5 * c[-1])]), f[1])
 
 
 def channel_noise(record: xr.Dataset, channels: tuple[str, ...]) -> np.ndarray:
@@ -182,13 +233,16 @@ class OutputError:
             raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
         self.record = record
         self.kind = record.attrs["kind"]
-        self.fixed = {k: float(v) for k, v in (fixed or {}).items()}
+        fixed = dict(fixed or {})
+        if self.kind == "forced" and "mass" in record.attrs:
+            fixed.setdefault("m", float(record.attrs["mass"]))  # a known mass (--mass) is not estimated
+        self.fixed = {k: float(v) for k, v in fixed.items()}
         self.ranges = {k: (float(v[0]), float(v[1])) for k, v in (ranges or {}).items()}
         self.scales = scales or record_scales(record)
         self.par = Parameterisation.build(model, self.kind, self.scales, ranges=ranges, fixed=fixed)
         self.model = self.par.model
         self.inputs = Inputs.from_record(record)
-        self.channels = OUTPUTS[self.kind]
+        self.channels = outputs_of(record)
         y = np.column_stack([record[c].values for c in self.channels])
         self.valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(y.shape[0], bool)
         bad = ~np.isfinite(y[self.valid])

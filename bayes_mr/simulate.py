@@ -28,7 +28,12 @@ from .models.drivers import run_batch
 OUTPUT_NAMES = {
     "structure": ("displacement", "velocity", "acceleration", "force"),
     "device": ("force", "damper_force"),
+    "forced": ("displacement", "velocity", "acceleration", "force"),
 }
+#: Input channel that drives each kind of test (a device test is also driven by its velocity).
+DRIVE = {"structure": "ground_acceleration", "device": "displacement", "forced": "applied_force"}
+#: Damper command channels (whichever a record has drives spencer and voltage_dependence).
+COMMANDS = ("voltage", "current")
 
 
 @dataclass(frozen=True)
@@ -37,14 +42,17 @@ class Inputs:
 
     Attributes
     ----------
-    kind : {"structure", "device"}
+    kind : {"structure", "device", "forced"}
     dt : float
         Sample interval [s].
     rows : ndarray, shape (N, 3)
-        Structure: ground acceleration [m/s²], 0, voltage [V];
-        device: displacement [m], velocity [m/s], voltage [V].
+        Structure: ground acceleration [m/s²], 0, command;
+        forced: applied force [N], 0, command;
+        device: displacement [m], velocity [m/s], command. The command is the
+        damper's voltage [V] or current [A], whichever the record has.
     mass : float or None
-        Storey mass [kg] (structure tests).
+        Storey mass [kg] (structure tests); a forced test's mass is its
+        parameter ``m`` (this field only records a known one).
     """
 
     kind: str
@@ -66,11 +74,13 @@ class Inputs:
         kind = record.attrs["kind"]
         n = record.sizes["time"]
         rows = np.zeros((n, 3))
-        if "voltage" in record:
-            rows[:, 2] = record["voltage"].values
-        if kind == "structure":
-            rows[:, 0] = record["ground_acceleration"].values
-            mass = float(record.attrs["mass"])
+        for name in COMMANDS:
+            if name in record:
+                rows[:, 2] = record[name].values
+                break
+        if kind != "device":
+            rows[:, 0] = record[DRIVE[kind]].values
+            mass = float(record.attrs["mass"]) if "mass" in record.attrs else None
         else:
             rows[:, 0] = record["displacement"].values
             if "velocity" not in record:
@@ -91,6 +101,16 @@ class Inputs:
         if voltage is not None:
             rows[:, 2] = voltage
         return cls("structure", float(dt), rows, float(mass))
+
+    @classmethod
+    def forced(cls, applied_force, dt: float, command=None, mass: float | None = None) -> "Inputs":
+        """Forced-test inputs from an applied force [N] sampled every dt [s] (``mass`` [kg] if known)."""
+        p = np.asarray(applied_force, float)
+        rows = np.zeros((p.size, 3))
+        rows[:, 0] = p
+        if command is not None:
+            rows[:, 2] = command
+        return cls("forced", float(dt), rows, None if mass is None else float(mass))
 
     @classmethod
     def device(cls, displacement, velocity, dt: float, voltage=None) -> "Inputs":
@@ -218,6 +238,7 @@ def synthesize(
     seed: int | np.random.SeedSequence | None = None,
     band: float | None = None,
     source: str = "simulate",
+    outputs: tuple[str, ...] | None = None,
 ) -> xr.Dataset:
     """A simulated test record in the package schema, with noise.
 
@@ -229,15 +250,23 @@ def synthesize(
     time : ndarray, shape (N,)
         Uniform sample times [s].
     inputs : dict
-        Structure test: ``ground_acceleration`` [m/s²]; device test:
-        ``displacement`` [m] and ``velocity`` [m/s]; optionally ``voltage`` [V].
+        Structure test: ``ground_acceleration`` [m/s²]; forced test:
+        ``applied_force`` [N]; device test: ``displacement`` [m] and
+        ``velocity`` [m/s]; optionally the damper command ``voltage`` [V] or
+        ``current`` [A].
     mass : float, optional
-        Storey mass [kg] (structure tests).
+        Storey mass [kg] (structure tests). Forced tests: the known mass,
+        written to the record (it must equal θ's ``m``); None leaves the mass
+        a parameter to identify.
     noise : float
         Noise as a fraction of each channel's RMS (0.01 = 1 %), thesis §3.8:
-        on the input as process noise (structure: the frame feels
-        ẍ_g + w while the record keeps ẍ_g; device: the recorded motion carries
-        the noise) and on every measured output.
+        on the input as process noise (structure and forced: the frame feels
+        ẍ_g + w, the mass p + w, while the record keeps the clean input;
+        device: the recorded motion carries the noise) and on every measured
+        output.
+    outputs : tuple of str, optional
+        The measured outputs to keep (structure and forced tests; any
+        non-empty subset of the kind's outputs). Default: all.
     seed : int or SeedSequence, optional
         Seed of the noise (its entropy is stored in the record's attributes).
     band : float, optional
@@ -249,10 +278,14 @@ def synthesize(
         Record with ``noise_sd_<channel>`` attributes and the true
         ``force`` (damper force) channel.
     """
-    from .data.schema import make_record
+    from .data.schema import OUTPUTS, kind_of, make_record
 
     model = get_model(model)
-    kind = "structure" if "ground_acceleration" in inputs else "device"
+    kind = kind_of([k for k, v in inputs.items() if v is not None], source)
+    if kind == "forced" and mass is not None:
+        m = float(np.asarray(theta, float)[model.param_names(kind).index("m")])
+        if not np.isclose(m, mass, rtol=1e-12):
+            raise ValueError(f"mass {mass} kg differs from the parameter m = {m} kg")
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     time = np.asarray(time, float)
     dt = float(time[1] - time[0])
@@ -260,13 +293,25 @@ def synthesize(
     attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
              "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
     channels, sds, sim = _measure(model, theta, kind, inputs, dt, mass, noisy)
+    if outputs is not None:
+        channels, sds = _keep_outputs(kind, outputs, channels, sds, OUTPUTS[kind])
     attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
-    if inputs.get("voltage") is not None:
-        channels["voltage"] = np.asarray(inputs["voltage"], float)
+    for name in COMMANDS:
+        if inputs.get(name) is not None:
+            channels[name] = np.asarray(inputs[name], float)
     if not sim.ok.all():
         raise ValueError(f"the simulation of {model.name} diverged at sample {int(sim.failed[0])}: "
                          "check the parameters (a stiffer law may need a higher sampling rate)")
     return make_record(time, channels, kind=kind, mass=mass, source=source, attrs=attrs)
+
+
+def _keep_outputs(kind: str, outputs, channels: dict, sds: dict, possible: tuple[str, ...]):
+    """The channels and noise SDs without the outputs a partial record does not measure."""
+    drop = [c for c in possible if c not in outputs]
+    unknown = [c for c in outputs if c not in possible]
+    if unknown or kind == "device":
+        raise ValueError(f"outputs {unknown or outputs}: a {kind} test measures {', '.join(possible)}")
+    return ({c: v for c, v in channels.items() if c not in drop}, {c: v for c, v in sds.items() if c not in drop})
 
 
 def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float | None):
@@ -286,20 +331,23 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
     """Simulate and 'measure' a test: the recorded channels, their noise SDs and the simulation.
 
     The noise is drawn in a fixed order (structure: input, displacement,
-    acceleration; device: displacement, velocity, force) so a seed gives the
-    same record.
+    acceleration; forced: input, displacement, velocity, acceleration;
+    device: displacement, velocity, force) so a seed gives the same record.
     """
-    volt = inputs.get("voltage")
+    volt = next((inputs[c] for c in COMMANDS if inputs.get(c) is not None), None)
     sds = {}
-    if kind == "structure":
-        ag = np.asarray(inputs["ground_acceleration"], float)
-        felt, sd_ag = noisy(ag)  # the frame feels ẍ_g + w; the record keeps ẍ_g
-        sim = simulate(model, Inputs.structure(felt, dt, mass, volt), theta)
-        channels = {"ground_acceleration": ag}
-        for name in ("displacement", "acceleration"):
+    if kind != "device":
+        drive = DRIVE[kind]
+        u = np.asarray(inputs[drive], float)
+        felt, sd_u = noisy(u)  # the frame (mass) feels the input + w; the record keeps the input
+        rows = Inputs.structure(felt, dt, mass, volt) if kind == "structure" else Inputs.forced(felt, dt, volt, mass)
+        sim = simulate(model, rows, theta)
+        channels = {drive: u}
+        names = ("displacement", "acceleration") if kind == "structure" else ("displacement", "velocity", "acceleration")
+        for name in names:
             channels[name], sds[name] = noisy(sim[name])
         channels["force"] = sim["force"]
-        sds["ground_acceleration"] = sd_ag
+        sds[drive] = sd_u
     else:
         x = np.asarray(inputs["displacement"], float)
         v = np.asarray(inputs["velocity"], float)

@@ -53,7 +53,7 @@ def check_columns(present: list[str], src: str, label_row: int | None, inputs_on
     inputs_only : bool
         An input file (``bayes-mr simulate --input``): only the driving channel is required.
     """
-    kind = kind_of(present)
+    kind = kind_of(present, src)
     valid = ("time",) + REQUIRED[kind] + OPTIONAL[kind]
     for name in present:
         if name not in valid:

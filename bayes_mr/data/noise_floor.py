@@ -40,8 +40,8 @@ class NoiseFloor(dict):
 
 
 def input_channel(ds: xr.Dataset) -> str:
-    """The channel that drives a test: ground acceleration (structure) or displacement (device)."""
-    return "ground_acceleration" if ds.attrs.get("kind") == STRUCTURE else "displacement"
+    """The channel that drives a test: ground acceleration (structure), applied force (forced) or displacement."""
+    return {STRUCTURE: "ground_acceleration", "forced": "applied_force"}.get(ds.attrs.get("kind"), "displacement")
 
 
 def moving_sd(x: np.ndarray, window: int) -> np.ndarray:

@@ -21,7 +21,7 @@ from . import units as _units
 from .checks import CSV_SUFFIXES, NC_SUFFIXES, check_time, file_suffix
 from .read_csv import read_csv
 from .read_netcdf import read_netcdf
-from .schema import DEVICE, STRUCTURE, Where, kind_of, make_record
+from .schema import DEVICE, Where, check_mass, kind_of, make_record
 
 
 def read_file(
@@ -82,7 +82,7 @@ def read_file(
     else:
         raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz or .nc")
 
-    kind = kind_of(channels)
+    kind = kind_of(channels, src)
     time, rebuilt = check_time(time, src, label)
     if rebuilt:
         attrs["time_rebuilt"] = "time stamps rounded in the file; rebuilt as t0 + i*dt"
@@ -91,7 +91,7 @@ def read_file(
 
     m = _storey_mass(attrs, mass, kind, src)
     channel_attrs = attrs.pop("_channel_attrs", {})
-    ds = make_record(time, channels, kind=kind, mass=m if kind == STRUCTURE else None, source=src, valid=valid)
+    ds = make_record(time, channels, kind=kind, mass=m if kind != DEVICE else None, source=src, valid=valid)
     for name, a in channel_attrs.items():
         if name in ds:
             ds[name].attrs.update(a)
@@ -108,8 +108,5 @@ def _storey_mass(attrs: dict, mass: float | None, kind: str, src: str) -> float 
     if mass is not None:
         attrs["mass"] = float(mass)
     m = attrs.pop("mass", None)
-    if kind == STRUCTURE and (m is None or not np.isfinite(m) or m <= 0):
-        raise Where(src).error(
-            "a structure test needs the storey mass", "pass --mass KG (or a netCDF 'mass' attribute)"
-        )
+    check_mass(kind, m, src)
     return m

@@ -26,7 +26,7 @@ from .checks import (
     file_suffix,
     one_line,
 )
-from .schema import MIN_SAMPLES, STRUCTURE, Where, kind_of
+from .schema import MIN_SAMPLES, OUTPUTS, Where, kind_of
 
 
 def read_csv(
@@ -205,8 +205,8 @@ def read_inputs(
     if file_suffix(path) not in CSV_SUFFIXES:
         raise Where(src).error("inputs must be a CSV file", "write time and ground_acceleration (or displacement) as CSV")
     time, channels, _, _ = read_csv(path, src, _units.parse_unit_options(units), inputs_only=True)
-    kind = kind_of(channels)
-    measured = ("displacement", "acceleration", "force") if kind == STRUCTURE else ("force",)
+    kind = kind_of(channels, src)
+    measured = OUTPUTS[kind] + ("force",)
     outputs = [c for c in channels if c in measured]
     if outputs:
         raise Where(src, outputs[0], 1).error("an input file holds inputs only", "drop the measured outputs")

@@ -39,6 +39,7 @@ ACCEPTED: dict[str, dict[str, float]] = {
     },
     "force": {"N": 1.0, "kN": 1e3, "lbf": _LBF, "kip": 1e3 * _LBF},
     "voltage": {"V": 1.0, "mV": 1e-3},
+    "current": {"A": 1.0, "mA": 1e-3},
     "time": {"s": 1.0, "ms": 1e-3},
 }
 
@@ -50,7 +51,9 @@ QUANTITY: dict[str, str] = {
     "ground_acceleration": "acceleration",
     "acceleration": "acceleration",
     "force": "force",
+    "applied_force": "force",
     "voltage": "voltage",
+    "current": "current",
 }
 
 #: Plausible peak |value| in SI per channel: (low, high, hint below, hint above).
@@ -73,12 +76,15 @@ PLAUSIBLE: dict[str, tuple[float | None, float | None, str, str]] = {
     "ground_acceleration": (0.05, 100.0, "g", "cm/s^2 or mm/s^2"),
     "acceleration": (0.05, 100.0, "g", "cm/s^2 or mm/s^2"),
     "force": (1e-2, 1e6, "kN", "values labelled as kN that are in N"),
+    "applied_force": (1e-2, 1e6, "kN", "values labelled as kN that are in N"),
     "voltage": (None, 100.0, "", "mV"),
+    # MR damper drivers give 0-3 A; more than 50 A is a file in mA read as A
+    "current": (None, 50.0, "", "mA"),
 }
-_SUGGEST_LOW = {"ground_acceleration": "g", "acceleration": "g", "force": "kN"}
+_SUGGEST_LOW = {"ground_acceleration": "g", "acceleration": "g", "force": "kN", "applied_force": "kN"}
 _SUGGEST_HIGH = {
     "displacement": "mm", "velocity": "mm/s", "ground_acceleration": "cm/s^2",
-    "acceleration": "cm/s^2", "voltage": "mV",
+    "acceleration": "cm/s^2", "voltage": "mV", "current": "mA",
 }
 #: Plausible sampling rates [Hz]; outside, the time column is likely in ms or µs.
 FS_RANGE = (10.0, 1e6)

@@ -121,6 +121,8 @@ class LSQResult:
 def linear_names(lik: OutputError) -> tuple[str, ...]:
     """Free parameters the force is linear in (given the others)."""
     model = lik.model
+    if lik.kind == "forced" or (lik.kind == "structure" and len(lik.channels) < 2):
+        return ()  # the sub-fit's force target needs the measured motion and acceleration of a full record
     lin = list(LINEAR_FORM[model.form.name])
     if lik.kind == "structure" and not model.form.frame_in_form:
         lin = ["c", "k"]

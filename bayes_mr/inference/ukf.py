@@ -88,6 +88,7 @@ class Problem:
     model: Model
     kind: str
     inputs: Inputs
+    channels: tuple[str, ...]  # the measured channels, the columns of yobs and R
     yobs: np.ndarray
     valid: np.ndarray
     coords: Coordinates
@@ -128,12 +129,17 @@ def make_problem(lik: OutputError, settings: UKFSettings = UKFSettings()) -> Pro
     sscale = model.state_scales(kind, theta_mid, lik.scales)
     q = (settings.state_walk * sscale) ** 2 * h
     p0 = (1e-3 * sscale) ** 2
-    if kind == "structure":
-        # the ground acceleration is measured with noise: it drives x, ẋ as process noise
-        sd_ag = float(channel_noise(lik.record, ("ground_acceleration",))[0])
-        q[0] = (sd_ag * h * h / 2) ** 2
-        q[1] = (sd_ag * h) ** 2
-    return Problem(model, kind, lik.inputs, lik.y, lik.valid, coords, template, free, R, q, p0, lik.scales)
+    if kind != "device":
+        # the input is measured with noise: it drives x, ẋ as process noise (a forced test's force
+        # through the mass, taken at the middle of its range when it is estimated)
+        drive = "ground_acceleration" if kind == "structure" else "applied_force"
+        sd_in = float(channel_noise(lik.record, (drive,))[0])
+        if kind == "forced":
+            sd_in /= theta_mid[model.param_names(kind).index("m")]
+        q[0] = (sd_in * h * h / 2) ** 2
+        q[1] = (sd_in * h) ** 2
+    return Problem(model, kind, lik.inputs, tuple(lik.channels), lik.y, lik.valid, coords, template, free, R, q,
+                   p0, lik.scales)
 
 
 def lhs_priors(coords: Coordinates, n_lhs: int = 10, taus=TAUS, *, seed: int | np.random.Generator = 0) -> list[Prior]:
@@ -166,7 +172,7 @@ def _kernel_args(problem: Problem, settings: UKFSettings):
     width = hi - lo
     phi_lo = np.where(coords.log, lo - margin, lo - settings.box_decades * width)
     phi_hi = np.where(coords.log, hi + margin, hi + settings.box_decades * width)
-    lay = model.layout(kind)
+    lay = model.layout(kind, problem.channels)  # the filter predicts the channels the likelihood measures
     cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max)
     return dict(
         lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.log,

@@ -25,7 +25,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from ..models.kernel import K_MASS, L_KIND, L_NS, STRUCT, advance, deriv, rate, substeps
+from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, advance, channel, deriv, rate, substeps
 
 # status codes of a run
 OK = 0
@@ -66,13 +66,10 @@ def cholesky(A, Lo, n):
 
 @hot
 def observe(lay, cst, th, t, a, s, ds, y):
-    """Measured channels predicted from state s: structure [x, −f_r/m], device [f_r]."""
+    """Measured channels predicted from state s: those the layout's L_OBS slots name, in order."""
     f_r, f_d = deriv(lay, cst, th, t, a, s, ds)
-    if lay[L_KIND] == STRUCT:
-        y[0] = s[0]
-        y[1] = -f_r / cst[K_MASS]
-    else:
-        y[0] = f_r
+    for q in range(y.shape[0]):
+        y[q] = channel(lay, cst, th, a, s, f_r, lay[L_OBS + q])
 
 
 @hot
@@ -268,10 +265,10 @@ def _ukf_loop(
         for i in range(nsig):
             _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
             deriv(lay, cst, TH[i], t, inputs[k], X[i, :ns], K1[i])
-            if lay[L_KIND] == STRUCT:
-                vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
-            else:
+            if lay[L_KIND] == DEVICE:
                 vmax = max(abs(inputs[k, 1]), abs(inputs[k + 1, 1]))
+            else:
+                vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
             r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax)
             if r_i > lam:
                 lam = r_i

@@ -80,6 +80,7 @@ from .ukf import TAUS, Prior, Problem, UKFSettings
 _NOISE_CHANNELS = {
     "structure": ("displacement", "acceleration", "ground_acceleration"),
     "device": ("force",),
+    "forced": ("displacement", "velocity", "acceleration", "applied_force"),
 }
 
 

@@ -15,22 +15,22 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from .kernel import K_MASS, L_KIND, L_NS, STRUCT, advance, deriv, rate, substeps
+from .kernel import DEVICE, L_KIND, L_NS, acceleration, advance, deriv, rate, substeps
 
 
 @hot(inline="always")
 def _vmax(lay, cst, s, k1, a0, a1, h):
-    if lay[L_KIND] == STRUCT:
-        return abs(s[1]) + abs(k1[1]) * h
-    return max(abs(a0[1]), abs(a1[1]))
+    if lay[L_KIND] == DEVICE:
+        return max(abs(a0[1]), abs(a1[1]))
+    return abs(s[1]) + abs(k1[1]) * h
 
 
 @hot(inline="always")
-def _write_out(lay, cst, s, f_r, f_d, out):
-    if lay[L_KIND] == STRUCT:
+def _write_out(lay, cst, p, a, s, f_r, f_d, out):
+    if lay[L_KIND] != DEVICE:
         out[0] = s[0]
         out[1] = s[1]
-        out[2] = -f_r / cst[K_MASS]
+        out[2] = acceleration(lay, cst, p, a, f_r)
         out[3] = f_d
     else:
         out[0] = f_r
@@ -46,7 +46,7 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
     for k in range(N):
         t = k * h
         f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
-        _write_out(lay, cst, s, f_r, f_d, out[k])
+        _write_out(lay, cst, p, inputs[k], s, f_r, f_d, out[k])
         if not math.isfinite(f_r):
             for kk in range(k, N):
                 for j in range(out.shape[1]):
@@ -71,7 +71,7 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
     Parameters
     ----------
     out : ndarray, shape (N, n_out)
-        Structure: displacement, velocity, absolute acceleration, damper force.
+        Structure and forced: displacement, velocity, absolute acceleration, damper force.
         Device: force (total), damper force.
     schedule : int64 ndarray, shape (N-1,)
         Sub-steps per interval: written when ``use_schedule`` is False, read

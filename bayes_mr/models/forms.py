@@ -13,6 +13,23 @@ arbitrarily many sub-steps (a least-squares fit of the measured damper spent
 13 minutes at n = 0.5 before this bound). The normalized form's σ is kept
 at σ ≥ 1/2, where |z| ≤ 1 is invariant (Ikhrouane & Rodellar 2005); below it
 an unloading branch can push z outward and the filter diverges.
+
+Signs: every parameter is positive (log scale) except the classic
+``bouc-wen``'s ``gamma``. In the classic law ṙ = ẋ − β₁|ẋ||r|^{n−1}r −
+γẋ|r|^n the loading branch is ṙ = ẋ(1 − (β₁+γ)|r|^n) and the unloading one
+ṙ = ẋ(1 + (β₁−γ)|r|^n): β₁ > 0 is the dissipation (loop area), while γ of
+either sign is admissible (Wen 1976; Ikhouane & Rodellar 2007 classify the
+bounded, softening cases −β₁ < γ ≤ β₁; γ < −β₁ is a hardening loop, bounded
+only over the record's range, which is the Bouc–Wen benchmark of Noël &
+Schoukens 2016: β₁ = 800 /m, γ = −1100 /m at n = 1). The other forms' laws
+are written so that their parameters are positive by construction (Dahl's
+and LuGre's rates, the normalized form's ρ, σ ≥ 1/2); Spencer's γ, β are the
+same Bouc–Wen pair and could in principle carry the same sign freedom, but
+the published MR-damper fits (Spencer et al. 1997 and after) are all
+positive with γ ≈ β, and a negative one there would make the damper's
+hysteretic force grow without bound, so they stay positive. A law that
+blows up in a run is a recorded divergence (the simulator flags the sample),
+never a crash.
 """
 
 from __future__ import annotations
@@ -57,7 +74,9 @@ BOUC_WEN = Form(
         ParamSpec("c", "N·s/m", "viscous damping", 0.3, F_V, (1e-3, 2.0)),
         ParamSpec("k", "N/m", "stiffness (elastic and hysteretic)", 9.0, F_X, (1e-4, 3.0)),
         ParamSpec("beta1", "1/m^n", "Bouc–Wen β₁ (scale relative to X⁻² assumes n ≈ 2)", 2.0, PER_X2, (1e-4, 100.0)),
-        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ", 1.0, PER_X2, (1e-4, 100.0)),
+        # signed: γ < 0 hardens the loading branch (the Bouc–Wen benchmark's γ is −1100 /m at n = 1);
+        # carried linearly within ±100 X⁻², the upper end of β₁'s range
+        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ (signed)", 1.0, PER_X2, (0.0, 100.0), positive=False),
         ParamSpec("n", "-", "Bouc–Wen exponent", 2.0, ONE, (1.0, 4.0)),
     ),
     ("r",),

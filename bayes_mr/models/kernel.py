@@ -9,10 +9,11 @@ the machine code on disk.
 
 Conventions
 -----------
-State ``s`` of a structure test: ``[x, ẋ, form states…, effect states…]``;
-of a device test: ``[form states…, effect states…]`` (x and ẋ are inputs).
-Input row ``a`` (3,): structure ``[ẍ_g, 0, v]``; device ``[x, ẋ, v]``,
-linear in time between samples. ``p`` holds natural (SI) parameters.
+State ``s`` of a structure or forced test: ``[x, ẋ, form states…, effect
+states…]``; of a device test: ``[form states…, effect states…]`` (x and ẋ
+are inputs). Input row ``a`` (3,): structure ``[ẍ_g, 0, v]``; forced
+``[p, 0, v]`` (applied force [N]); device ``[x, ẋ, v]``, linear in time
+between samples; ``v`` is the damper command (voltage or current). ``p`` holds natural (SI) parameters.
 Time ``t`` is measured from the first sample.
 
 Equations are those of ``docs/CONTRACT.md`` (thesis 3-31/32, 3-52..3-70,
@@ -28,7 +29,9 @@ from .._jit import hot
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
 # --- kinds ------------------------------------------------------------------
-STRUCT, DEVICE = 0, 1
+STRUCT, DEVICE, FORCED = 0, 1, 2
+# --- measured-channel codes (layout slots L_OBS…) ----------------------------------
+OBS_X, OBS_V, OBS_A, OBS_F = 0, 1, 2, 3
 
 # --- layout slots (int64 array) ---------------------------------------------
 L_FORM = 0  # form code
@@ -47,7 +50,10 @@ L_SE = 12  # state index of the amplitude envelope
 L_LVR = 13  # low_velocity_rolloff: c_s
 L_K3 = 14  # cubic_stiffness: k3
 L_NP = 15  # number of parameters
-LAYOUT_SIZE = 16
+L_MASS = 16  # forced test: index in p of the mass m [kg]
+L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
+N_OBS = 3
+LAYOUT_SIZE = L_OBS + N_OBS
 
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
@@ -113,7 +119,7 @@ def deriv(lay, cst, p, t, a, s, ds):
     """
     form = lay[L_FORM]
     kind = lay[L_KIND]
-    if kind == STRUCT:
+    if kind != DEVICE:
         x = s[0]
         xd = s[1]
     else:
@@ -208,7 +214,38 @@ def deriv(lay, cst, p, t, a, s, ds):
     if kind == STRUCT:
         ds[0] = xd
         ds[1] = -a[0] - f_r / cst[K_MASS]
+    elif kind == FORCED:
+        ds[0] = xd
+        ds[1] = (a[0] - f_r) / p[lay[L_MASS]]
     return f_r, f_d
+
+
+@hot(inline="always")
+def mass(lay, cst, p):
+    """The moving mass [kg]: a forced test's parameter m, else the constant (structure tests)."""
+    if lay[L_MASS] >= 0:
+        return p[lay[L_MASS]]
+    return cst[K_MASS]
+
+
+@hot(inline="always")
+def acceleration(lay, cst, p, a, f_r):
+    """Absolute acceleration [m/s²]: structure −f_r/m (= ẍ + ẍ_g); forced (p − f_r)/m (= ẍ)."""
+    if lay[L_KIND] == FORCED:
+        return (a[0] - f_r) / mass(lay, cst, p)
+    return -f_r / cst[K_MASS]
+
+
+@hot(inline="always")
+def channel(lay, cst, p, a, s, f_r, code):
+    """Measured channel ``code`` (OBS_*) at state ``s`` with restoring force ``f_r``."""
+    if code == OBS_X:
+        return s[0]
+    if code == OBS_V:
+        return s[1]
+    if code == OBS_A:
+        return acceleration(lay, cst, p, a, f_r)
+    return f_r
 
 
 @hot
@@ -290,8 +327,8 @@ def rate(lay, cst, p, t, s, vmax):
         lam += abs(p[lay[L_VD] + 2])
         damp += abs(p[lay[L_VD] + 1]) * u
     stiff *= m_k
-    if lay[L_KIND] == STRUCT:
-        m = cst[K_MASS]
+    if lay[L_KIND] != DEVICE:
+        m = mass(lay, cst, p)
         if lay[L_K3] >= 0:
             stiff += 3.0 * abs(p[lay[L_K3]]) * s[0] * s[0]
         lam += damp / m + math.sqrt(abs(stiff) / m) + math.sqrt(abs(coupling) / m)
@@ -351,6 +388,6 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
         if lay[L_SA] >= 0:
             # amplitude envelope: follows peaks at once, decays with time constant T_env
             ie = lay[L_SE]
-            xa = abs(s[0]) if lay[L_KIND] == STRUCT else abs(am[0])
+            xa = abs(am[0]) if lay[L_KIND] == DEVICE else abs(s[0])
             decayed = s[ie] * math.exp(-hs / cst[K_TENV])
             s[ie] = xa if xa > decayed else decayed

@@ -24,14 +24,28 @@ from . import kernel
 from .effects import Effect
 from .params import F_V, F_X, Coordinates, ParamSpec, Scales
 
-#: The kinds of test a model is bound to: a storey on a shake table, or the damper alone.
-KINDS = ("structure", "device")
+#: The kinds of test a model is bound to: a storey on a shake table, the damper alone, or a
+#: mass driven by a measured force (``m ẍ + f_r = p``).
+KINDS = ("structure", "device", "forced")
 
 #: Frame parameters a structure test adds to a form without its own ``c``, ``k`` (``spencer``).
 FRAME = (
     ParamSpec("c", "N·s/m", "frame viscous damping", 100.0, F_V, (1e-4, 2.0)),
     ParamSpec("k", "N/m", "frame stiffness", 2.5e4, F_X, (1e-3, 3.0)),
 )
+
+#: The driven mass of a forced test, identified with the others unless it is known (``--mass``,
+#: then held fixed). Its plausible range is relative to F·X/V² — the mass that would take the
+#: whole applied force as inertia at the record's frequency (V²/X ≈ ω²X) — down to 1e-3 of it,
+#: where the restoring force carries nearly all of it.
+MASS = ParamSpec("m", "kg", "mass driven by the applied force (forced tests)", 1.0, (1, 1, -2, 0), (1e-3, 10.0))
+
+#: Kernel codes of the channels a filter can measure.
+_OBS_CODE = {"displacement": kernel.OBS_X, "velocity": kernel.OBS_V, "acceleration": kernel.OBS_A,
+             "force": kernel.OBS_F}
+#: Channels measured by default, by kind of test (all a record of that kind can have).
+_OBS_DEFAULT = {"structure": ("displacement", "acceleration"), "device": ("force",),
+                "forced": ("displacement", "velocity", "acceleration")}
 
 # Effects a form already contains.
 _BUILT_IN = {"spencer": ("voltage_dependence", "low_velocity_rolloff")}
@@ -40,7 +54,7 @@ _BUILT_IN = {"spencer": ("voltage_dependence", "low_velocity_rolloff")}
 def _check_kind(kind: str) -> int:
     if kind not in KINDS:
         raise ValueError(f"unknown kind of test '{kind}'; valid: {', '.join(KINDS)}")
-    return kernel.STRUCT if kind == "structure" else kernel.DEVICE
+    return {"structure": kernel.STRUCT, "device": kernel.DEVICE, "forced": kernel.FORCED}[kind]
 
 
 @dataclass(frozen=True)
@@ -118,11 +132,13 @@ class Model:
         """All parameters for a test of ``kind``, in kernel order."""
         _check_kind(kind)
         specs: list[ParamSpec] = []
-        if kind == "structure" and not self.form.frame_in_form:
+        if kind != "device" and not self.form.frame_in_form:
             specs.extend(FRAME)
         specs.extend(self.form.params)
         for e in self.effects:
             specs.extend(e.params)
+        if kind == "forced":
+            specs.append(MASS)
         return tuple(specs)
 
     def param_names(self, kind: str) -> tuple[str, ...]:
@@ -189,7 +205,7 @@ class Model:
     # --- states and kernel layout -----------------------------------------------
     def state_names(self, kind: str) -> tuple[str, ...]:
         _check_kind(kind)
-        names: list[str] = ["x", "xdot"] if kind == "structure" else []
+        names: list[str] = [] if kind == "device" else ["x", "xdot"]
         names.extend(self.form.states)
         for e in self.effects:
             names.extend(e.states)
@@ -230,20 +246,31 @@ class Model:
                 out.append(1.0)
         return np.array(out, float)
 
-    def layout(self, kind: str) -> np.ndarray:
-        """The int64 layout array the compiled kernel reads (see kernel.L_*)."""
+    def layout(self, kind: str, channels: tuple[str, ...] | None = None) -> np.ndarray:
+        """The int64 layout array the compiled kernel reads (see kernel.L_*).
+
+        ``channels`` are the measured channels a filter predicts, in order
+        (default: every output of the kind).
+        """
         k = _check_kind(kind)
         lay = np.full(kernel.LAYOUT_SIZE, -1, dtype=np.int64)
         lay[kernel.L_FORM] = self.form.code
         lay[kernel.L_KIND] = k
         names = self.param_names(kind)
         states = self.state_names(kind)
-        if kind == "structure" and not self.form.frame_in_form:
+        if kind != "device" and not self.form.frame_in_form:
             lay[kernel.L_PFRAME] = 0
             lay[kernel.L_PFORM] = len(FRAME)
         else:
             lay[kernel.L_PFORM] = 0
-        lay[kernel.L_SFORM] = 2 if kind == "structure" else 0
+        lay[kernel.L_SFORM] = 0 if kind == "device" else 2
+        if kind == "forced":
+            lay[kernel.L_MASS] = names.index(MASS.name)
+        channels = _OBS_DEFAULT[kind] if channels is None else tuple(channels)
+        if not 0 < len(channels) <= kernel.N_OBS or any(c not in _OBS_CODE for c in channels):
+            raise ValueError(f"measured channels {channels}: give 1 to {kernel.N_OBS} of {', '.join(_OBS_CODE)}")
+        for j, c in enumerate(channels):
+            lay[kernel.L_OBS + j] = _OBS_CODE[c]
         lay[kernel.L_NS] = len(states)
         lay[kernel.L_NP] = len(names)
         slot = {
@@ -279,5 +306,5 @@ class Model:
         e = self.effect("sensor_delay")
         if e is None:
             return None
-        return e.options.get("channel") or ("acceleration" if kind == "structure" else "force")
+        return e.options.get("channel") or ("force" if kind == "device" else "acceleration")
 

@@ -3,21 +3,24 @@
 One entry point, :func:`score` (and :class:`Scorer`, which prepares a record
 once and scores many predictions — the 100 trained runs of a validation):
 
-* ``mse`` — thesis eq. 3-44. Structure test: displacement and absolute
+* ``mse`` — thesis eq. 3-44 over the output channels the record measures
+  (``mse_channels``). Structure test with both: displacement and absolute
   acceleration, each squared error over its measurement-noise variance,
-  ``100/N Σ[(x−x̂)²/σ_d² + (a−â)²/σ_a²]``. Device test (not in the thesis,
-  whose tests were all on the frame): the same normalised form on the one
-  measured channel, ``100/N Σ (F−F̂)²/σ_F²``. A model that is right to the
-  noise therefore scores about 200 on a structure test and about 100 on a
-  device test (100 per channel); scores compare between models on the same
-  record, not between kinds of test.
+  ``100/N Σ[(x−x̂)²/σ_d² + (a−â)²/σ_a²]``. Any other set of channels (a
+  device test's force, a forced test's displacement, velocity and/or
+  acceleration, a structure test with one of its two) gets the same
+  normalised form summed over its channels, ``100/N Σ_c Σ (y_c−ŷ_c)²/σ_c²``.
+  A model that is right to the noise therefore scores about 100 per measured
+  channel; scores compare between models on the same record, not between
+  records that measure different channels.
 * ``force_errors`` — E_t, E_x, E_ẋ (3-45..3-49) wherever the damper force is
   measured: always on a device test (ẋ = the velocity channel, ẍ = its
-  gradient), on a structure test when the record has a ``force`` channel
-  (predicted damper force = the simulation's ``force`` output; ẋ = smoothed
-  derivative of the measured storey displacement, ẍ = measured absolute
-  minus ground acceleration, i.e. the storey's relative acceleration — the
-  damper's piston motion).
+  gradient), on a structure or forced test when the record has a ``force``
+  channel and measures the motion (predicted damper force = the
+  simulation's ``force`` output; ẋ = the velocity channel, else the smoothed
+  derivative of the measured displacement; ẍ = the measured acceleration
+  (minus the ground's on a structure test: the piston's relative motion),
+  else the derivative of ẋ).
 * ``force_nrmse`` — RMS(F−F̂)/SD(F) where the force is measured.
 
 Every score is over the record's ``valid`` samples only; N is their number.
@@ -31,7 +34,7 @@ import numpy as np
 import xarray as xr
 
 from ..data.derive import smooth_velocity
-from ..data.schema import OUTPUTS
+from ..data.schema import outputs_of
 from ..likelihood import channel_noise
 from .metrics import force_errors, force_nrmse, mse
 
@@ -70,7 +73,7 @@ class Scorer:
 
     def __init__(self, record: xr.Dataset, *, noise_sd: dict[str, float] | None = None):
         self.kind = record.attrs["kind"]
-        self.channels = OUTPUTS[self.kind]
+        self.channels = outputs_of(record)
         n_time = record.sizes["time"]
         self.valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(n_time, bool)
         self.n = int(self.valid.sum())
@@ -88,16 +91,7 @@ class Scorer:
         self.force = record["force"].values.astype(float) if self.has_force else None
         self.xdot = self.xddot = None
         if self.has_force:
-            if self.kind == "structure":
-                x = _bridged(record["displacement"].values.astype(float), self.valid)
-                self.xdot = smooth_velocity(x, dt)
-                self.xddot = record["acceleration"].values - record["ground_acceleration"].values
-            else:
-                if "velocity" in record:
-                    self.xdot = record["velocity"].values.astype(float)
-                else:
-                    self.xdot = smooth_velocity(_bridged(record["displacement"].values.astype(float), self.valid), dt)
-                self.xddot = np.gradient(self.xdot, dt)
+            self.xdot, self.xddot = _piston_motion(record, self.valid, dt)
 
     def __call__(self, predicted: dict[str, np.ndarray]) -> dict:
         """Score one prediction.
@@ -127,33 +121,56 @@ class Scorer:
         missing = [c for c in need if c not in predicted]
         if missing:
             raise ValueError(f"prediction lacks channel(s) {missing}")
-        if self.kind == "structure":
+        if self.channels == ("displacement", "acceleration"):
             x, a = self.y["displacement"], self.y["acceleration"]
             value = mse(x, predicted["displacement"], a, predicted["acceleration"],
                         self.sigma["displacement"], self.sigma["acceleration"], valid=self.valid)
         else:
-            value = _force_mse(self.y["force"], predicted["force"], self.sigma["force"], self.valid)
+            value = sum(_channel_mse(c, self.y[c], predicted[c], self.sigma[c], self.valid) for c in self.channels)
         errors = nrmse = None
         if self.has_force:
             f_hat = predicted["force"]
-            errors = force_errors(self.force, f_hat, self.xdot, self.xddot, valid=self.valid)
+            if self.xdot is not None:
+                errors = force_errors(self.force, f_hat, self.xdot, self.xddot, valid=self.valid)
             nrmse = force_nrmse(self.force, f_hat, valid=self.valid)
         rmse = {c: float(np.sqrt(np.mean((self.y[c][self.valid] - np.asarray(predicted[c], float)[self.valid]) ** 2)))
                 for c in self.channels}
-        return {"mse": value, "force_errors": errors, "force_nrmse": nrmse, "rmse": rmse, "n": self.n}
+        return {"mse": value, "mse_channels": list(self.channels), "force_errors": errors, "force_nrmse": nrmse,
+                "rmse": rmse, "n": self.n}
 
 
-def _force_mse(f: np.ndarray, f_hat: np.ndarray, sigma_f: float, valid: np.ndarray) -> float:
-    """``100/N Σ (F−F̂)²/σ_F²`` over the valid samples (3-44 on the one measured channel)."""
-    f_hat = np.asarray(f_hat, float)
-    if f_hat.shape != f.shape:
-        raise ValueError(f"shape mismatch: force {f.shape} vs predicted force {f_hat.shape}")
-    if not (np.isfinite(sigma_f) and sigma_f > 0):
-        raise ValueError(f"sigma_F must be a positive noise SD, got {sigma_f!r}")
-    e = f[valid] - f_hat[valid]
+def _piston_motion(record: xr.Dataset, valid: np.ndarray, dt: float):
+    """(ẋ, ẍ) of the damper's motion from what the record measures, or (None, None) when it cannot tell."""
+    kind = record.attrs["kind"]
+
+    def values(name):
+        return record[name].values.astype(float)
+
+    if "velocity" in record:
+        xdot = values("velocity")
+    elif "displacement" in record:
+        xdot = smooth_velocity(_bridged(values("displacement"), valid), dt)
+    else:
+        return None, None
+    if kind == "device" or "acceleration" not in record:
+        return xdot, np.gradient(xdot, dt)
+    xddot = values("acceleration")
+    if kind == "structure":
+        xddot = xddot - values("ground_acceleration")
+    return xdot, xddot
+
+
+def _channel_mse(name: str, y: np.ndarray, y_hat: np.ndarray, sigma: float, valid: np.ndarray) -> float:
+    """``100/N Σ (y−ŷ)²/σ²`` over the valid samples (3-44's term of one measured channel)."""
+    y_hat = np.asarray(y_hat, float)
+    if y_hat.shape != y.shape:
+        raise ValueError(f"shape mismatch: {name} {y.shape} vs predicted {name} {y_hat.shape}")
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"the noise SD of {name} must be positive, got {sigma!r}")
+    e = y[valid] - y_hat[valid]
     if not np.all(np.isfinite(e)):
-        raise ValueError("force or predicted force is non-finite at a valid sample")
-    return float(100.0 * np.sum(e * e) / sigma_f**2 / e.size)
+        raise ValueError(f"{name} or predicted {name} is non-finite at a valid sample")
+    return float(100.0 * np.sum(e * e) / sigma**2 / e.size)
 
 
 def score(record: xr.Dataset, predicted: dict[str, np.ndarray], *, noise_sd: dict[str, float] | None = None) -> dict:
@@ -171,6 +188,6 @@ def score(record: xr.Dataset, predicted: dict[str, np.ndarray], *, noise_sd: dic
     Returns
     -------
     dict
-        ``mse``, ``force_errors`` (or None), ``force_nrmse`` (or None), ``rmse``, ``n``.
+        ``mse``, ``mse_channels``, ``force_errors`` (or None), ``force_nrmse`` (or None), ``rmse``, ``n``.
     """
     return Scorer(record, noise_sd=noise_sd)(predicted)

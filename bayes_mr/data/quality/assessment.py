@@ -9,7 +9,7 @@ import numpy as np
 import xarray as xr
 
 from ..derive import savgol_attrs, smooth_velocity
-from ..schema import DEVICE, STRUCTURE
+from ..schema import DEVICE, FORCED, STRUCTURE
 from .config import QualityConfig
 from .detectors import (
     dilate,
@@ -27,6 +27,7 @@ from .report import FAULT_KINDS, Fault, QualityReport, Repair
 INPUTS: dict[str, tuple[str, ...]] = {
     STRUCTURE: ("ground_acceleration",),
     DEVICE: ("displacement", "velocity"),
+    FORCED: ("applied_force",),
 }
 
 
