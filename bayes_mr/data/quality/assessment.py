@@ -342,7 +342,8 @@ def _repair_inputs(out: xr.Dataset, ds: xr.Dataset, report: QualityReport) -> li
 #: How :func:`repair_pair` repairs a measured displacement and velocity.
 _PAIR_METHOD = (
     "kept consistent with the other motion channel: displacement from the velocity's integral "
-    "(closure spread over the run), velocity from the displacement's derivative; both faulty: "
+    "(closure spread over the run), velocity bridged so that it integrates to the displacement's change; "
+    "both faulty: "
     "straight-line displacement and its slope (at rest where held)"
 )
 

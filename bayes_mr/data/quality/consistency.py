@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from ...stats import robust_sd
-from ..derive import smooth_velocity
 from .detectors import runs
 
 
@@ -88,8 +87,9 @@ def repair_pair(x: np.ndarray, v: np.ndarray, bad_x: np.ndarray, bad_v: np.ndarr
     * Both bad: the displacement bridged by a straight line between the valid
       neighbours (held at the record's ends), the velocity the slope of that
       bridge (zero where held).
-    * Velocity bad where the displacement is good (after the above): the
-      Savitzky–Golay derivative of the (repaired) displacement.
+    * Velocity bad where the displacement is good (after the above): a bridge
+      continuous with the valid velocities on either side whose integral is the
+      displacement's change across the run (:func:`_bridge_velocity`).
 
     Parameters
     ----------
@@ -99,8 +99,6 @@ def repair_pair(x: np.ndarray, v: np.ndarray, bad_x: np.ndarray, bad_v: np.ndarr
         Samples to replace in each.
     dt : float
         Sample interval [s].
-    window : int, optional
-        Savitzky–Golay window [samples] (default: chosen from the displacement's bandwidth).
 
     Returns
     -------
@@ -123,10 +121,33 @@ def repair_pair(x: np.ndarray, v: np.ndarray, bad_x: np.ndarray, bad_v: np.ndarr
         integral = _cumtrapz(v, dt)
         for a, b in runs(x_only):
             _integrate_run(x, integral, a, b)
-    v_only = bad_v & ~bad_x
-    if v_only.any():
-        v[v_only] = smooth_velocity(x, dt, window=window)[v_only]
+    for a, b in runs(bad_v & ~bad_x):
+        _bridge_velocity(x, v, a, b, dt)
     return x, v
+
+
+def _bridge_velocity(x: np.ndarray, v: np.ndarray, a: int, b: int, dt: float) -> None:
+    """v[a:b] continuous with its valid neighbours and integrating to the displacement's change (in place).
+
+    Between anchors a − 1 and b: the straight line between the two velocities
+    plus the parabolic bump (zero at both anchors) whose integral makes the
+    mismatch e = x − ∫v dt level on both sides of the run — its mean over up to
+    max(b − a, 8) samples each side (fewer at a record end), so that the displacement's noise at one sample does not set the
+    bridge. At a record end: the displacement's mean slope over the run.
+    """
+    n = x.size
+    left, right = a - 1, b
+    if left < 0 or right >= n:
+        lo, hi = max(left, 0), min(right, n - 1)
+        v[a:b] = (x[hi] - x[lo]) / ((hi - lo) * dt) if hi > lo else 0.0
+        return
+    i = np.arange(left, right + 1)
+    v[a:b] = v[left] + (v[right] - v[left]) * (i[1:-1] - left) / (right - left)
+    k = max(b - a, 8)
+    e = mismatch(x, v, dt)
+    gap = np.mean(e[right:min(right + k, n)]) - np.mean(e[max(left - k + 1, 0):left + 1])
+    bump = ((i - left) * (right - i)).astype(float)
+    v[a:b] += (bump * gap / (dt * bump.sum()))[1:-1]
 
 
 def _integrate_run(x: np.ndarray, integral: np.ndarray, a: int, b: int) -> None:
