@@ -2,7 +2,8 @@
 
 :func:`load` runs, in order,
 
-1. **read** — :func:`bayes_mr.data.read.read_file`: CSV / CSV.gz / netCDF,
+1. **read** — :func:`bayes_mr.data.read.read_file`: CSV / CSV.gz / netCDF /
+   MATLAB / HDF5 (lab column names mapped by ``columns``),
    validated, **units** converted to SI (:mod:`bayes_mr.data.units`), time
    grid and storey mass checked;
 2. **derive** — :func:`bayes_mr.data.derive.with_velocity`: a device test
@@ -40,6 +41,7 @@ def load(
     *,
     mass: float | None = None,
     units: Mapping[str, str] | Iterable[str] | None = None,
+    columns: Mapping[str, str] | Iterable[str] | str | None = None,
     quality: bool | QualityConfig = True,
     trim: bool = False,
     velocity: str | None = "derive",
@@ -51,7 +53,8 @@ def load(
     Parameters
     ----------
     path : str or path-like
-        ``*.csv``, ``*.csv.gz`` or ``*.nc`` (see :func:`bayes_mr.data.read.read_file`).
+        ``*.csv``, ``*.csv.gz``, ``*.nc``, MATLAB ``*.mat`` (v5 to v7.3) or HDF5
+        ``*.h5`` / ``*.hdf5`` (see :func:`bayes_mr.data.read.read_file`).
         Column headers are schema names (``docs/CONTRACT.md``, "Data"),
         optionally with a unit in brackets (``displacement [mm]``).
     mass : float, optional
@@ -61,6 +64,10 @@ def load(
         Units of columns whose header carries none (e.g. ``{"displacement":
         "cm"}``, or ``["displacement=cm"]`` from ``--units``). A header unit that
         disagrees is an error.
+    columns : mapping or "channel=name,..." string(s), optional
+        Which file column or variable holds which channel (``{"time": "t",
+        "displacement": "D", "force": "F"}``, or ``"time=t,displacement=D,force=F"``
+        from ``--columns``); unmapped columns named like channels are read too.
     quality : bool or QualityConfig
         Run quality control with the default or the given thresholds. A
         netCDF record that already carries a quality report keeps its mask and
@@ -103,7 +110,7 @@ def load(
     """
     if velocity not in ("derive", None):
         raise ValueError(f"velocity must be 'derive' or None, got {velocity!r}")
-    ds = read_file(path, mass=mass, units=units)
+    ds = read_file(path, mass=mass, units=units, columns=columns)
     if ds.attrs["kind"] == DEVICE and velocity == "derive":
         ds = with_velocity(ds)
     # a netCDF written after quality control carries its report (a CSV carries no attributes)
