@@ -53,10 +53,9 @@ def load(
     Parameters
     ----------
     path : str or path-like
-        ``*.csv``, ``*.csv.gz``, ``*.nc``, MATLAB ``*.mat`` (v5 to v7.3) or HDF5
-        ``*.h5`` / ``*.hdf5`` (see :func:`bayes_mr.data.read.read_file`).
-        Column headers are schema names (``docs/CONTRACT.md``, "Data"),
-        optionally with a unit in brackets (``displacement [mm]``).
+        ``*.csv``, ``*.csv.gz``, ``*.nc``, ``*.mat`` (v5–v7.3), ``*.h5`` / ``*.hdf5``
+        (:func:`bayes_mr.data.read.read_file`); headers are schema names
+        (``docs/CONTRACT.md``), optionally with a unit (``displacement [mm]``).
     mass : float, optional
         Storey mass [kg] for a structure test; overrides a netCDF ``mass``
         attribute. Required for structure tests if the file carries none.
@@ -65,13 +64,11 @@ def load(
         "cm"}``, or ``["displacement=cm"]`` from ``--units``). A header unit that
         disagrees is an error.
     columns : mapping or "channel=name,..." string(s), optional
-        Which file column or variable holds which channel (``{"time": "t",
-        "displacement": "D", "force": "F"}``, or ``"time=t,displacement=D,force=F"``
-        from ``--columns``); unmapped columns named like channels are read too.
+        Which file column or variable holds which channel (``{"time": "t"}`` or
+        ``"time=t,force=F"``, from ``--columns``).
     quality : bool or QualityConfig
-        Run quality control with the default or the given thresholds. A
-        netCDF record that already carries a quality report keeps its mask and
-        is not re-assessed.
+        Quality control with the default or the given thresholds (a netCDF
+        record with a quality report keeps its mask, not re-assessed).
     trim : bool
         Trim to the excited part; the report is stored in the ``trim`` attribute.
     velocity : {"derive", None}
@@ -99,9 +96,8 @@ def load(
     Raises
     ------
     RecordError
-        A bad file, column, cell or time grid, as :func:`~bayes_mr.data.read.read_file`
-        says (one line: file, column, line or sample, remedy); time stamps rounded in
-        the file are accepted (:func:`~bayes_mr.data.checks.check_time`).
+        A bad file, column, cell or time grid: one line naming file, column, line or
+        sample and the remedy (:func:`~bayes_mr.data.read.read_file`).
 
     Warns
     -----

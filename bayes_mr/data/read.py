@@ -78,22 +78,8 @@ def read_file(
     if path.is_dir():
         raise Where(src).error("is a directory, not a record", "give a .csv, .csv.gz or .nc file")
     suffix = file_suffix(path)
-    overrides = _units.parse_unit_options(units)
-    mapping = parse_columns(columns)
-    if suffix in CSV_SUFFIXES:
-        time, channels, attrs, valid = read_csv(path, src, overrides, columns=mapping)
-        label = "line"
-    elif suffix in NC_SUFFIXES:
-        if mapping:
-            raise Where(src).error("a column mapping is for CSV, MATLAB and HDF5 files",
-                                   "a netCDF record already uses schema names; drop --columns")
-        time, channels, attrs, valid = read_netcdf(path, src, overrides)
-        label = "sample"
-    elif suffix in ARRAY_SUFFIXES:
-        time, channels, attrs, valid = read_arrays(path, src, overrides, mapping)
-        label = "sample"
-    else:
-        raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz, .nc, .mat, .h5 or .hdf5")
+    time, channels, attrs, valid = _read_columns(path, src, _units.parse_unit_options(units), parse_columns(columns))
+    label = "line" if suffix in CSV_SUFFIXES else "sample"
 
     kind = kind_of(channels)
     time, rebuilt = check_time(time, src, label)
@@ -114,6 +100,21 @@ def read_file(
         ds.attrs.setdefault(key, value)
     ds.attrs["masked"] = int((~ds["valid"].values).sum())
     return ds
+
+
+def _read_columns(path: Path, src: str, overrides: dict[str, str], mapping: dict[str, str]) -> tuple:
+    """(time, channels in SI, attrs, valid or None) by the file's type."""
+    suffix = file_suffix(path)
+    if suffix in CSV_SUFFIXES:
+        return read_csv(path, src, overrides, columns=mapping)
+    if suffix in NC_SUFFIXES:
+        if mapping:
+            raise Where(src).error("a column mapping is for CSV, MATLAB and HDF5 files",
+                                   "a netCDF record already uses schema names; drop --columns")
+        return read_netcdf(path, src, overrides)
+    if suffix in ARRAY_SUFFIXES:
+        return read_arrays(path, src, overrides, mapping)
+    raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz, .nc, .mat, .h5 or .hdf5")
 
 
 def _storey_mass(attrs: dict, mass: float | None, kind: str, src: str) -> float | None:
