@@ -57,8 +57,7 @@ def load(
         (:func:`bayes_mr.data.read.read_file`); headers are schema names
         (``docs/CONTRACT.md``), optionally with a unit (``displacement [mm]``).
     mass : float, optional
-        Storey mass [kg] for a structure test; overrides a netCDF ``mass``
-        attribute. Required for structure tests if the file carries none.
+        Storey mass [kg] (structure tests; overrides the file's ``mass``).
     units : mapping or iterable of "column=unit", optional
         Units of columns whose header carries none (e.g. ``{"displacement":
         "cm"}``, or ``["displacement=cm"]`` from ``--units``). A header unit that
@@ -70,7 +69,7 @@ def load(
         Quality control with the default or the given thresholds (a netCDF
         record with a quality report keeps its mask, not re-assessed).
     trim : bool
-        Trim to the excited part; the report is stored in the ``trim`` attribute.
+        Trim to the excited part (report in the ``trim`` attribute).
     velocity : {"derive", None}
         Device tests without a ``velocity`` column: derive one from
         displacement by a Savitzky–Golay differentiator (attrs
@@ -83,8 +82,7 @@ def load(
         estimates it from the record it is given.
     noise_record : xarray.Dataset or path, optional
         A no-input record of the same rig for the noise floor (implies
-        ``noise_floor=True``); a path is read without quality control or a
-        derived velocity.
+        ``noise_floor=True``); a path is read without quality control.
 
     Returns
     -------
