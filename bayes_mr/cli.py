@@ -59,6 +59,7 @@ def _read(path: str, args, *, what: str = "record"):
 
     return load(
         path, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
+        columns=getattr(args, "columns", None),
         quality=not getattr(args, "no_quality", False), trim=getattr(args, "trim", False),
     )
 
@@ -274,6 +275,9 @@ def _common_data_flags(p: argparse.ArgumentParser) -> None:
                                               "a forced test's known mass (else its parameter m is estimated)")
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT",
                    help="unit of a column whose header has none, e.g. displacement=cm (cm, mm, g, kN, …)")
+    p.add_argument("--columns", action="append", metavar="CHANNEL=NAME,...",
+                   help="which file column (CSV header, MATLAB/HDF5 variable) holds which channel, "
+                        "e.g. time=t,displacement=D,force=F")
     p.add_argument("--no-quality", action="store_true",
                    help="do not mask clipped, spiky or disturbed samples (quality control is on by default)")
     p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")

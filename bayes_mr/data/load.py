@@ -2,7 +2,8 @@
 
 :func:`load` runs, in order,
 
-1. **read** — :func:`bayes_mr.data.read.read_file`: CSV / CSV.gz / netCDF,
+1. **read** — :func:`bayes_mr.data.read.read_file`: CSV / CSV.gz / netCDF /
+   MATLAB / HDF5 (lab column names mapped by ``columns``),
    validated, **units** converted to SI (:mod:`bayes_mr.data.units`), time
    grid and storey mass checked;
 2. **derive** — :func:`bayes_mr.data.derive.with_velocity`: a device test
@@ -40,6 +41,7 @@ def load(
     *,
     mass: float | None = None,
     units: Mapping[str, str] | Iterable[str] | None = None,
+    columns: Mapping[str, str] | Iterable[str] | str | None = None,
     quality: bool | QualityConfig = True,
     trim: bool = False,
     velocity: str | None = "derive",
@@ -51,22 +53,23 @@ def load(
     Parameters
     ----------
     path : str or path-like
-        ``*.csv``, ``*.csv.gz`` or ``*.nc`` (see :func:`bayes_mr.data.read.read_file`).
-        Column headers are schema names (``docs/CONTRACT.md``, "Data"),
-        optionally with a unit in brackets (``displacement [mm]``).
+        ``*.csv``, ``*.csv.gz``, ``*.nc``, ``*.mat`` (v5–v7.3), ``*.h5`` / ``*.hdf5``
+        (:func:`bayes_mr.data.read.read_file`); headers are schema names
+        (``docs/CONTRACT.md``), optionally with a unit (``displacement [mm]``).
     mass : float, optional
-        Storey mass [kg] for a structure test; overrides a netCDF ``mass``
-        attribute. Required for structure tests if the file carries none.
+        Storey mass [kg] (structure tests; overrides the file's ``mass``).
     units : mapping or iterable of "column=unit", optional
         Units of columns whose header carries none (e.g. ``{"displacement":
         "cm"}``, or ``["displacement=cm"]`` from ``--units``). A header unit that
         disagrees is an error.
+    columns : mapping or "channel=name,..." string(s), optional
+        Which file column or variable holds which channel (``{"time": "t"}`` or
+        ``"time=t,force=F"``, from ``--columns``).
     quality : bool or QualityConfig
-        Run quality control with the default or the given thresholds. A
-        netCDF record that already carries a quality report keeps its mask and
-        is not re-assessed.
+        Quality control with the default or the given thresholds (a netCDF
+        record with a quality report keeps its mask, not re-assessed).
     trim : bool
-        Trim to the excited part; the report is stored in the ``trim`` attribute.
+        Trim to the excited part (report in the ``trim`` attribute).
     velocity : {"derive", None}
         Device tests without a ``velocity`` column: derive one from
         displacement by a Savitzky–Golay differentiator (attrs
@@ -79,8 +82,7 @@ def load(
         estimates it from the record it is given.
     noise_record : xarray.Dataset or path, optional
         A no-input record of the same rig for the noise floor (implies
-        ``noise_floor=True``); a path is read without quality control or a
-        derived velocity.
+        ``noise_floor=True``); a path is read without quality control.
 
     Returns
     -------
@@ -92,9 +94,8 @@ def load(
     Raises
     ------
     RecordError
-        A bad file, column, cell or time grid, as :func:`~bayes_mr.data.read.read_file`
-        says (one line: file, column, line or sample, remedy); time stamps rounded in
-        the file are accepted (:func:`~bayes_mr.data.checks.check_time`).
+        A bad file, column, cell or time grid: one line naming file, column, line or
+        sample and the remedy (:func:`~bayes_mr.data.read.read_file`).
 
     Warns
     -----
@@ -103,7 +104,7 @@ def load(
     """
     if velocity not in ("derive", None):
         raise ValueError(f"velocity must be 'derive' or None, got {velocity!r}")
-    ds = read_file(path, mass=mass, units=units)
+    ds = read_file(path, mass=mass, units=units, columns=columns)
     if ds.attrs["kind"] == DEVICE and velocity == "derive":
         ds = with_velocity(ds)
     # a netCDF written after quality control carries its report (a CSV carries no attributes)

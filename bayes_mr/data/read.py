@@ -1,4 +1,4 @@
-"""Read a record file (CSV, CSV.gz, netCDF) into the package schema: the first step of :func:`bayes_mr.data.load`.
+"""Read a record file (CSV, CSV.gz, netCDF, MATLAB, HDF5) into the package schema: the first step of :func:`bayes_mr.data.load`.
 
 :func:`read_file` validates the file (every problem is a one-line
 :class:`~bayes_mr.data.schema.RecordError` naming the file, the column and the
@@ -19,6 +19,7 @@ import xarray as xr
 
 from . import units as _units
 from .checks import CSV_SUFFIXES, NC_SUFFIXES, check_time, file_suffix
+from .read_arrays import ARRAY_SUFFIXES, parse_columns, read_arrays
 from .read_csv import read_csv
 from .read_netcdf import read_netcdf
 from .schema import DEVICE, Where, check_mass, kind_of, make_record
@@ -29,8 +30,9 @@ def read_file(
     *,
     mass: float | None = None,
     units: Mapping[str, str] | Iterable[str] | None = None,
+    columns: Mapping[str, str] | Iterable[str] | str | None = None,
 ) -> xr.Dataset:
-    """Read a test record from CSV (plain or gzip) or netCDF, in SI units.
+    """Read a test record from CSV (plain or gzip), netCDF, MATLAB ``.mat`` or HDF5, in SI units.
 
     Parameters
     ----------
@@ -45,6 +47,10 @@ def read_file(
     units : mapping or iterable of "column=unit", optional
         Units of columns whose header carries none (``{"displacement": "cm"}``
         or ``["displacement=cm"]``). A header unit that disagrees is an error.
+    columns : mapping or "channel=name,..." string(s), optional
+        Which file column (CSV header without its unit, MATLAB / HDF5
+        variable) holds which channel, e.g. ``{"time": "t", "force": "F"}``
+        (:func:`~bayes_mr.data.read_arrays.parse_columns`). Not for netCDF.
 
     Returns
     -------
@@ -58,7 +64,7 @@ def read_file(
     ------
     RecordError
         One line naming file, column and line (CSV; header = line 1) or sample
-        (netCDF), and the remedy.
+        (netCDF, MATLAB, HDF5: index from 0), and the remedy.
 
     Warns
     -----
@@ -72,15 +78,8 @@ def read_file(
     if path.is_dir():
         raise Where(src).error("is a directory, not a record", "give a .csv, .csv.gz or .nc file")
     suffix = file_suffix(path)
-    overrides = _units.parse_unit_options(units)
-    if suffix in CSV_SUFFIXES:
-        time, channels, attrs, valid = read_csv(path, src, overrides)
-        label = "line"
-    elif suffix in NC_SUFFIXES:
-        time, channels, attrs, valid = read_netcdf(path, src, overrides)
-        label = "sample"
-    else:
-        raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz or .nc")
+    time, channels, attrs, valid = _read_columns(path, src, _units.parse_unit_options(units), parse_columns(columns))
+    label = "line" if suffix in CSV_SUFFIXES else "sample"
 
     kind = kind_of(channels, src)
     time, rebuilt = check_time(time, src, label)
@@ -101,6 +100,21 @@ def read_file(
         ds.attrs.setdefault(key, value)
     ds.attrs["masked"] = int((~ds["valid"].values).sum())
     return ds
+
+
+def _read_columns(path: Path, src: str, overrides: dict[str, str], mapping: dict[str, str]) -> tuple:
+    """(time, channels in SI, attrs, valid or None) by the file's type."""
+    suffix = file_suffix(path)
+    if suffix in CSV_SUFFIXES:
+        return read_csv(path, src, overrides, columns=mapping)
+    if suffix in NC_SUFFIXES:
+        if mapping:
+            raise Where(src).error("a column mapping is for CSV, MATLAB and HDF5 files",
+                                   "a netCDF record already uses schema names; drop --columns")
+        return read_netcdf(path, src, overrides)
+    if suffix in ARRAY_SUFFIXES:
+        return read_arrays(path, src, overrides, mapping)
+    raise Where(src).error(f"unknown file type '{suffix or path.name}'", "use .csv, .csv.gz, .nc, .mat, .h5 or .hdf5")
 
 
 def _storey_mass(attrs: dict, mass: float | None, kind: str, src: str) -> float | None:

@@ -30,7 +30,7 @@ from .schema import MIN_SAMPLES, OUTPUTS, Where, kind_of
 
 
 def read_csv(
-    path: Path, src: str, overrides: dict[str, str], inputs_only: bool = False
+    path: Path, src: str, overrides: dict[str, str], inputs_only: bool = False, columns: dict[str, str] | None = None
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict, None]:
     """Columns of a record CSV, converted to SI.
 
@@ -43,6 +43,8 @@ def read_csv(
         Column → unit for columns whose header carries none (:func:`bayes_mr.data.units.parse_unit_options`).
     inputs_only : bool
         An input file: only the driving channel is required.
+    columns : dict, optional
+        Channel → header name (without its unit) for headers that are not schema names.
 
     Returns
     -------
@@ -56,7 +58,7 @@ def read_csv(
         A CSV carries no mask.
     """
     df = _drop_padding(_parse(path, src))
-    names, file_units = _header(df, src)
+    names, file_units = _header(df, src, columns or {})
     present = list(names.values())
     check_columns(present, src, label_row=1, inputs_only=inputs_only)
     check_overrides(overrides, present, src)
@@ -127,19 +129,31 @@ def _drop_padding(df: pd.DataFrame) -> pd.DataFrame:
     return df.iloc[:n_rows]
 
 
-def _header(df: pd.DataFrame, src: str) -> tuple[dict[str, str], dict[str, str | None]]:
-    """Header → schema name, and schema name → unit written in brackets (None if none)."""
+def _header(
+    df: pd.DataFrame, src: str, columns: dict[str, str]
+) -> tuple[dict[str, str], dict[str, str | None]]:
+    """Header → schema name (through the ``columns`` mapping), and schema name → unit in brackets (None if none)."""
     names: dict[str, str] = {}
     file_units: dict[str, str | None] = {}
+    channel_of = {var: name for name, var in columns.items()}
+    found = set()
     for col in df.columns:
         header = str(col)
         if header.startswith("Unnamed:"):
             raise Where(src, row=1).error("a column has no name", "give every column a header")
         name, unit = _units.split_header(header)
+        if name in channel_of:
+            found.add(name)
+            name = channel_of[name]
+        elif name in columns:  # a schema-named column the mapping replaced by another
+            continue
         if name in names.values():
             raise Where(src, name, 1).error("duplicate column", "keep one column per channel")
         names[header] = name
         file_units[name] = unit
+    for name, var in columns.items():
+        if var not in found:
+            raise Where(src, name, 1).error(f"no column '{var}' in the header", "check --columns")
     return names, file_units
 
 

@@ -11,6 +11,7 @@ import xarray as xr
 from ..derive import savgol_attrs, smooth_velocity
 from ..schema import DEVICE, FORCED, STRUCTURE
 from .config import QualityConfig
+from .consistency import consistent, repair_pair
 from .detectors import (
     dilate,
     end_events,
@@ -102,6 +103,7 @@ def assess(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> tuple[np.
         u = velocity if polarity is not None else None
         hits, explained[name], jumpy[name] = _channel_faults(name, x, bad.copy(), cfg, u, polarity)
         found.extend(hits)
+    found = _drop_agreeing(found, jumpy, series, cfg, float(ds.attrs.get("dt", 1.0)))
     found.extend(_end_disturbance(series, explained, jumpy, cfg, n))
     invalid, faults = _masks(found, cfg, n)
     faults.sort(key=lambda f: (chans.index(f.channel), FAULT_KINDS.index(f.kind)))
@@ -157,6 +159,43 @@ def _channel_faults(
             found.append((name, "velocity_range", flag, thr, why))
             jumpy |= flag
     return found, skip, jumpy
+
+
+#: Detections that a displacement and a velocity agreeing with each other explain.
+_MOTION_KINDS = ("jump", "velocity_range")
+
+
+def _drop_agreeing(
+    found: list[_Found], jumpy: dict[str, np.ndarray], series: dict[str, np.ndarray], cfg: QualityConfig, dt: float
+) -> list[_Found]:
+    """Without the jump / velocity-range samples on which a measured displacement and velocity agree.
+
+    ``jumpy`` is updated in place (agreeing samples are no end-of-test events either).
+    """
+    if "displacement" not in series or "velocity" not in series:
+        return found
+    motion = [(i, f) for i, f in enumerate(found) if f[0] in ("displacement", "velocity") and f[1] in _MOTION_KINDS]
+    if not motion:
+        return found
+    x = series["displacement"]
+    flag = np.zeros(x.size, bool)
+    for _, f in motion:
+        flag |= f[2]
+    lo, hi = np.quantile(x, [cfg.range_quantile, 1.0 - cfg.range_quantile])
+    agree = consistent(flag, x, series["velocity"], dt, cfg.agree_c, cfg.spike_reach,
+                       cfg.spike_floor * float(hi - lo))
+    if not agree.any():
+        return found
+    out = []
+    for i, f in enumerate(found):
+        if any(i == j for j, _ in motion):
+            f = (f[0], f[1], f[2] & ~agree, f[3], f[4])
+            if not f[2].any():
+                continue
+        out.append(f)
+    for name in ("displacement", "velocity"):
+        jumpy[name] &= ~agree
+    return out
 
 
 def _end_disturbance(
@@ -279,8 +318,9 @@ def apply_quality(ds: xr.Dataset, config: QualityConfig = QualityConfig()) -> xr
 def _repair_inputs(out: xr.Dataset, ds: xr.Dataset, report: QualityReport) -> list[Repair]:
     """Interpolate ``out``'s input channels across their masked runs (in place); re-derive a derived velocity."""
     n = report.n_samples
-    repairs = []
-    for name, m in _repair_plan(ds, report).items():
+    plan = _repair_plan(ds, report)
+    repairs = _repair_motion(out, ds, plan, float(report.dt))
+    for name, m in plan.items():
         good = ~m & np.isfinite(out[name].values)
         if not good.any():
             continue
@@ -297,6 +337,42 @@ def _repair_inputs(out: xr.Dataset, ds: xr.Dataset, report: QualityReport) -> li
         attrs = dict(vel.attrs)
         attrs.update(savgol_attrs(info))
         out["velocity"] = ("time", v, attrs)
+    return repairs
+
+
+#: How :func:`repair_pair` repairs a measured displacement and velocity.
+_PAIR_METHOD = (
+    "kept consistent with the other motion channel: displacement from the velocity's integral "
+    "(closure spread over the run), velocity bridged so that it integrates to the displacement's change; "
+    "both faulty: "
+    "straight-line displacement and its slope (at rest where held)"
+)
+
+
+def _repair_motion(out: xr.Dataset, ds: xr.Dataset, plan: dict[str, np.ndarray], dt: float) -> list[Repair]:
+    """Repair a measured displacement and velocity together (in place; their runs leave ``plan``).
+
+    Bridging one of them alone by a straight line would make the simulator's
+    two inputs disagree (a piston that moves with zero velocity); each is
+    repaired from the other where the other is good (:func:`repair_pair`).
+    """
+    if ds.attrs.get("kind", DEVICE) != DEVICE or not {"displacement", "velocity"} & set(plan):
+        return []
+    if "displacement" not in ds or "velocity" not in ds or ds["velocity"].attrs.get("derived"):
+        return []  # a derived velocity is re-derived from the repaired displacement instead
+    n = ds.sizes["time"]
+    bad_x = plan.get("displacement", np.zeros(n, bool))
+    bad_v = plan.get("velocity", np.zeros(n, bool))
+    if bad_x.all() or bad_v.all():
+        return []
+    plan.pop("displacement", None)
+    plan.pop("velocity", None)
+    x, v = repair_pair(ds["displacement"].values, ds["velocity"].values, bad_x, bad_v, dt)
+    repairs = []
+    for name, y, m in (("displacement", x, bad_x), ("velocity", v, bad_v)):
+        if m.any():
+            out[name] = ("time", y, dict(ds[name].attrs))
+            repairs.append(Repair(channel=name, count=int(m.sum()), ranges=tuple(runs(m)), method=_PAIR_METHOD))
     return repairs
 
 

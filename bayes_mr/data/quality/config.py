@@ -154,6 +154,15 @@ class QualityConfig:
     velocity_c: float = 4.0
     """Multiple of the ``velocity_quantile`` deviation that is out of range."""
 
+    agree_c: float = 8.0
+    """Device tests with a measured displacement *and* velocity: a run of
+    jump or out-of-range samples in either is physics, not a fault, when the
+    two channels agree across it — the change over the run (± ``spike_reach``
+    samples) of e = x − ∫v dt is within ``agree_c`` × its robust SD over every
+    window of that length in the record (at least ``spike_floor`` · R_rob of
+    the displacement). A fast but consistent transient (a step test's ramp, a
+    hard start) is then kept; a velocity that steps or rings on its own is not."""
+
     end_fraction: float = 0.05
     """End-of-test disturbance: searched in the last ``end_fraction`` of the
     record …"""

@@ -164,6 +164,11 @@ def spikes(x, cfg, u=None, polarity=1.0):
     # floor: a noise-free channel has σ_r ≈ 0, and an excursion of 0.1 % of the
     # range is no fault worth masking
     thr = max(cfg.spike_c * s_glob, cfg.spike_floor * float(hi - lo))
+    if thr <= 0:
+        # σ_r = 0 and R_rob = 0: the channel is exactly constant on ≥ 99 % of the
+        # record and noise-free (a step's ground acceleration is two one-sample
+        # pulses and zeros); there is no scale to call an excursion a spike against
+        return np.zeros(x.size, bool), 0.0, "not tested: noise-free and constant on ≥ 99 % of the record"
     flag = (np.abs(r) > thr) & (np.abs(r) > cfg.spike_local_c * local)
     if u is not None and flag.any():
         flag &= ~_grazes(x, r, flag, u, polarity, cfg.spike_reach, (lo, hi))
@@ -183,6 +188,8 @@ def jumps(x, cfg, skip, continuous):
         lo, hi = np.quantile(x, [cfg.range_quantile, 1.0 - cfg.range_quantile])
         thr = cfg.jump_range * float(hi - lo)
         reason = f"|Δx| > {cfg.jump_range:g} × the robust range = {thr:.4g}"
+    if thr <= 0:  # noise-free and constant almost everywhere: no scale to judge a step against (see spikes)
+        return np.zeros(x.size, bool), 0.0, "not tested: noise-free and constant on ≥ 99 % of the record"
     big = step > thr
     big &= ~(skip[:-1] | skip[1:])  # a step into or out of a known fault is that fault
     flag = np.zeros(x.size, bool)
