@@ -106,19 +106,35 @@ class Estimator(Protocol):
 
 
 def laplace_draws(phi: np.ndarray, cov: np.ndarray, lower: np.ndarray, upper: np.ndarray, n: int,
-                  rng: np.random.Generator) -> np.ndarray:
-    """Draws of φ from the Gaussian N(phi, cov), kept inside the prior box.
+                  rng: np.random.Generator, *, max_rounds: int = 50) -> tuple[np.ndarray, int]:
+    """Draws of φ from the Gaussian N(phi, cov) truncated to the prior box [lower, upper].
 
-    The prior is uniform on the box [lower, upper], so the Laplace posterior
-    is the Gaussian restricted to it: draws outside are clipped to the box
-    (an optimum on a bound with a huge SD would otherwise map to θ = inf).
+    The prior is uniform on the box, so the Laplace posterior is the Gaussian
+    restricted to it. Draws outside are rejected and drawn again (never
+    clipped: clipping piles mass on the bounds and biases the mean). Where the
+    box holds almost none of the Gaussian's mass (an optimum in a corner with a
+    huge SD), the draws still missing after ``max_rounds`` rounds are clipped,
+    and their number is returned so the result can say so.
 
     Returns
     -------
-    ndarray, shape (n, p)
+    draws : ndarray, shape (n, p)
+    n_clipped : int
+        Draws that had to be clipped (0 when truncation succeeded).
     """
-    draws = rng.multivariate_normal(phi, cov, size=n, method="eigh")
-    return np.clip(draws, lower, upper)
+    kept: list[np.ndarray] = []
+    need = n
+    for r in range(max_rounds):
+        # the first round draws exactly n (the whole answer when the box holds the Gaussian), later ones extra
+        batch = rng.multivariate_normal(phi, cov, size=need if r == 0 else max(2 * need, 64), method="eigh")
+        inside = batch[np.all((batch >= lower) & (batch <= upper), axis=1)][:need]
+        kept.append(inside)
+        need -= inside.shape[0]
+        if need == 0:
+            break
+    if need:
+        kept.append(np.clip(rng.multivariate_normal(phi, cov, size=need, method="eigh"), lower, upper))
+    return np.concatenate(kept), need
 
 
 def even_indices(n_have: int, n_want: int) -> np.ndarray:

@@ -49,8 +49,8 @@ class LeastSquares:
         lik = likelihood
         res = fit_lsq(lik, self.settings)
         coords = lik.par.coords
-        draws_phi = laplace_draws(res.phi, res.cov_phi, lik.phi_lo, lik.phi_hi, self.n_draws,
-                                  np.random.default_rng(seed))
+        draws_phi, n_clipped = laplace_draws(res.phi, res.cov_phi, lik.phi_lo, lik.phi_hi, self.n_draws,
+                                             np.random.default_rng(seed))
         x = draws_phi
         if lik.noise == "sampled":
             x = np.hstack([draws_phi, np.tile(np.log(res.sigma), (draws_phi.shape[0], 1))])
@@ -62,7 +62,8 @@ class LeastSquares:
              "nfev": ("start", np.array([s["nfev"] for s in res.starts]))},
             coords={"param": list(coords.names)})
         info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
-                "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts)}
+                "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
+                "draws_clipped": n_clipped}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info, groups={"lsq_starts": starts},
                          wall_s=res.wall_s)
