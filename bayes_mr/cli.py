@@ -157,7 +157,7 @@ def cmd_fit(args) -> int:
                            "or score a fit on another record with `bayes-mr validate RESULT.nc DATA2`")
         options["validate_on"] = _read(args.validate, args)
     job = Identify(args.model, engine(args.engine, **options), ranges=_ranges(args.prior),
-                   fixed=_floats(args.fix, "--fix"))
+                   fixed=_floats(args.fix, "--fix"), noise=args.noise)
     idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
     summary = results.summary_of(idata).to_dict()
     if args.output:
@@ -187,7 +187,8 @@ def cmd_compare(args) -> int:
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else None
     out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
-                  progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators)
+                  progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,
+                  noise=args.noise)
     out.pop("idata")
     print(markdown_table(table(out)), file=sys.stderr)
     if out["selected"]:
@@ -202,7 +203,7 @@ def cmd_diagnose(args) -> int:
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None
     out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
-                   progress=progress_say(on_terminal(not args.quiet)))
+                   progress=progress_say(on_terminal(not args.quiet)), noise=args.noise)
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
           f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
           file=sys.stderr)
@@ -287,6 +288,9 @@ def _job_flags(p: argparse.ArgumentParser, *, out: str | None, json: tuple[str, 
     """The flags the fitting verbs end with: seed, output folder (help ``out``; None: none), ``--json``
     (metavar, help), quiet, and the record's data flags."""
     p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--noise", choices=("iid", "ar"), default="iid",
+                   help="residual model of the likelihood: independent errors (iid, default) or an AR(p) process "
+                        "per channel, p by BIC on a first iid fit (ar); the UKF keeps its own iid model")
     if out:
         p.add_argument("--out", metavar="DIR", help=out)
     p.add_argument("--json", metavar=json[0], help=json[1])

@@ -107,10 +107,8 @@ def compare(
     *,
     engines: Sequence[str] = ("lsq", "mcmc", "ukf"),
     validate: xr.Dataset | None = None,
-    seed: int = 0,
-    progress=True,
-    out_dir: str | Path | None = None,
-    estimators: dict | None = None,
+    seed: int = 0, progress=True, out_dir: str | Path | None = None,
+    estimators: dict | None = None, noise: str = "iid",
 ) -> dict:
     """Fit every model with every engine and compare.
 
@@ -131,6 +129,8 @@ def compare(
     estimators : dict, optional
         Engine name → configured estimator (e.g. ``{"ukf": UKF(n_lhs=4)}``)
         overriding the defaults of :func:`bayes_mr.inference.estimators.engine`.
+    noise : {"iid", "ar"}
+        Residual model of every fit (``Identify.noise``).
 
     Returns
     -------
@@ -141,8 +141,7 @@ def compare(
         ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
         ``idata`` (not JSON: (model, engine) → InferenceData).
     """
-    say = progress_say(progress)
-    models = [get_model(m).name for m in models]
+    say, models = progress_say(progress), [get_model(m).name for m in models]
     if not models:
         raise ValueError("give at least one model to compare")
     engines = list(dict.fromkeys(engines))
@@ -156,7 +155,7 @@ def compare(
     for m in models:
         for e in engines:
             say(f"{m} × {e} …")
-            row, idata = _fit_row(Identify(m, estimators.get(e) or engine(e)), record, validate, seed, progress)
+            row, idata = _fit_row(Identify(m, estimators.get(e) or engine(e), noise=noise), record, validate, seed, progress)
             rows.append(row)
             if idata is None:
                 say(f"{m} × {e}: failed ({row['error']})")

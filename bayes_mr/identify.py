@@ -62,16 +62,27 @@ class Identify:
         Plausible-range overrides name → (lo, hi) [SI].
     fixed : dict, optional
         Parameters held fixed, name → value [SI].
+    noise : {"iid", "ar"}
+        Residual model of the likelihood (:mod:`bayes_mr.noise_model`):
+        independent Gaussian errors per channel, or an AR(p) process per
+        channel with p chosen by BIC on a first iid fit's residual. Least
+        squares, emcee, thermodynamic integration and stepping-stone all use
+        it. The UKF keeps its own iid measurement model: its evidence is the
+        innovation likelihood of its selected run, not comparable with the
+        other engines' (the fit JSON's ``evidence_note`` says so); only its
+        scores and pointwise log-likelihood use ``noise``.
     """
 
     model: Model | str
     estimator: Estimator = field(default_factory=LeastSquares)
     ranges: dict | None = None
     fixed: dict | None = None
+    noise: str = "iid"
 
     def likelihood(self, record: xr.Dataset) -> OutputError:
         """The binding of (model, record, noise model) every estimator consumes."""
-        return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed)
+        return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
+                           residual=self.noise)
 
     def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
         """Fit and return InferenceData (see :mod:`bayes_mr.results`); ``wall_s`` is the whole fit's."""

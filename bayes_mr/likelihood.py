@@ -15,10 +15,14 @@ log-uniform σ_c on [1e-4, 1] × SD(y_c) when the noise is sampled. Both are
 proper, so the evidence ∫ p(y|θ,σ) p(θ) p(σ) dθ dσ is defined; the σ prior
 is the same for every model fitted to the same record.
 
-What it does not model: residuals of a measured record are autocorrelated
-(model error is smooth in time), so with thousands of samples the posterior
-is narrower than the model error justifies. Decimating the record
-(``decimate=``) is the simple remedy offered here.
+Residuals of a measured record are autocorrelated (model error and the
+response to input noise are smooth in time); with independent errors and
+thousands of samples the posterior is narrower than the model error
+justifies. ``residual="ar"`` replaces the independent errors of each channel
+by an AR(p_c) process with profiled coefficients and σ_c its innovation SD
+(:mod:`bayes_mr.noise_model`: conditional likelihood, restarted after masked
+gaps; p_c chosen by BIC on the residual of a first iid fit). The default,
+``"iid"``, is the density above.
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ import xarray as xr
 from .data.schema import outputs_of
 from .models import Model, Scales, get_model
 from .models.params import Coordinates
+from .noise_model import ResidualModel, select_orders
+from .noise_model import log_density as ar_log_density
+from .noise_model import whiten as ar_whiten
 from .simulate import Inputs, Simulation, simulate
 
 LOG_2PI = float(np.log(2 * np.pi))
@@ -211,6 +218,9 @@ class OutputError:
         Sample ln σ_c with the parameters, or hold σ_c at ``noise_sd``.
     noise_sd : array, optional
         σ_c per channel for ``noise="fixed"`` (default: the record's noise floor).
+    residual : {"iid", "ar"} or ResidualModel
+        Residual model: independent Gaussian errors, or an AR(p_c) process per
+        channel (σ_c then is the innovation SD; see :mod:`bayes_mr.noise_model`).
 
     Notes
     -----
@@ -228,6 +238,7 @@ class OutputError:
         noise: str = "sampled",
         noise_sd: np.ndarray | None = None,
         scales: Scales | None = None,
+        residual: str | ResidualModel = "iid",
     ):
         if noise not in ("sampled", "fixed"):
             raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
@@ -251,6 +262,7 @@ class OutputError:
         self.y = y
         self.n_valid = int(self.valid.sum())
         self.noise = noise
+        self.residual = residual if isinstance(residual, ResidualModel) else ResidualModel(residual)
         self.noise_sd = np.asarray(noise_sd, float) if noise_sd is not None else channel_noise(record, self.channels)
         sd_y = np.array([np.std(y[self.valid, j]) for j in range(len(self.channels))])
         self.log_sigma_lo = np.log(SIGMA_SPAN[0] * sd_y)
@@ -332,8 +344,11 @@ class OutputError:
 
         ``ok`` (B,) marks simulations that completed; the others get −inf.
         With ``pointwise`` also returns the per-sample terms (B, N,
-        n_channels) (zero at invalid samples).
+        n_channels) (zero at invalid samples, and under the AR model at the
+        samples it conditions on).
         """
+        if self.residual.kind == "ar":
+            return self._ar_log_density(yhat, sigma, ok, pointwise)
         # a simulation that blew up overflows here; its total is set to −inf below
         with np.errstate(over="ignore", invalid="ignore"):
             if pointwise:
@@ -367,8 +382,48 @@ class OutputError:
             out[inside] = lp[inside] + self.log_likelihood(x[inside])
         return out
 
+    def _ar_log_density(self, yhat, sigma, ok, pointwise):
+        """:meth:`log_density` under the AR residual model (orders must have been chosen)."""
+        if not self.residual.resolved:
+            raise ValueError("the AR orders are not chosen yet: fit least squares first "
+                             "(or call choose_residual_orders at a parameter vector)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            total, terms = ar_log_density(self.y[None] - yhat, np.asarray(sigma, float), self.valid,
+                                          self.residual.orders, pointwise=True)
+        total = np.where(ok & np.isfinite(total), total, -np.inf)
+        return (total, terms) if pointwise else total
+
+    def choose_residual_orders(self, phi: np.ndarray) -> tuple[int, ...]:
+        """Choose the AR order of each channel by BIC on the residual at φ (a first iid fit's optimum).
+
+        Sets and returns ``residual.orders``; a no-op for the iid model or when already chosen.
+        """
+        if self.residual.resolved:
+            return self.residual.order_of(len(self.channels))
+        yhat, _ = self.predict(np.atleast_2d(phi))
+        orders = select_orders(np.where(self.valid[:, None], self.y - yhat[0], 0.0), self.valid,
+                               self.residual.max_order)
+        self.residual = ResidualModel("ar", orders, self.residual.max_order)
+        return orders
+
+    def whiten(self, resid: np.ndarray) -> np.ndarray:
+        """Prewhitened residuals (..., N, n_channels) under the chosen residual model [channel units].
+
+        Identity for the iid model and for AR before its orders are chosen (a
+        first iid fit); otherwise zero at the samples the AR model conditions on.
+        """
+        if self.residual.kind == "iid" or not self.residual.resolved:
+            return resid
+        r = np.asarray(resid, float)
+        w, _ = ar_whiten(r.reshape((-1,) + r.shape[-2:]), self.valid, self.residual.orders)
+        return w.reshape(r.shape)
+
     def residuals(self, phi: np.ndarray, sd: np.ndarray | None = None) -> np.ndarray:
-        """Standardised residuals (y − ŷ)/σ over valid samples, flattened (for least squares)."""
+        """Standardised residuals over valid samples, flattened (time, channel) (for least squares).
+
+        (y − ŷ)/σ, prewhitened first under the AR model (:meth:`whiten`): the
+        generalised-least-squares residual whose sum of squares is −2 ln p(y|θ, σ) + const.
+        """
         sd = self.noise_sd if sd is None else np.asarray(sd, float)
         yhat, _ = self.predict(np.atleast_2d(phi))
-        return ((self.y[self.valid] - yhat[0][self.valid]) / sd).ravel()
+        return (self.whiten(np.where(self.valid[:, None], self.y - yhat[0], 0.0))[self.valid] / sd).ravel()

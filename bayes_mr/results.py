@@ -19,6 +19,15 @@ Every fit — UKF, emcee, least squares — is stored as an
 * engine-specific extra groups (``ukf_training``: every run's prior, final
   mean/covariance, evidence, status and parameter history).
 
+Every summary says which residual model the likelihood used (``noise_model``:
+``iid`` or ``ar(p=…)`` with one AR order per channel, :mod:`bayes_mr.noise_model`)
+and the effective number of independent samples of each channel (``n_eff``,
+from the point estimate's residual). The UKF keeps its own iid measurement
+model whatever the likelihood's: its ``log_evidence`` is the innovation
+likelihood of the selected run (``evidence_route`` ``ukf_innovations``), not a
+marginal likelihood under the likelihood's residual model, and is not
+comparable with the least-squares or MCMC evidence (``evidence_note`` says so).
+
 The JSON summary (the ``fit`` keys of ``docs/CONTRACT.md``) is kept as a
 string attribute ``summary`` of the ``posterior`` group so that
 ``validate RESULT.nc`` can read the model, kind and engine back.
@@ -43,6 +52,8 @@ import xarray as xr
 from .data.schema import OUTPUTS
 from .inference.base import Posterior, even_indices
 from .likelihood import OutputError
+from .noise_model import ResidualModel
+from .noise_model import describe as describe_noise
 from .scores import score
 from .simulate import simulate
 
@@ -83,8 +94,10 @@ class FitSummary:
         Measured channel → RMS error of the point's prediction over the
         scored samples [channel units].
     noise_model : str
-        The residual model of the likelihood (``iid``: independent Gaussian
-        errors per channel).
+        The residual model of the likelihood: ``iid`` (independent Gaussian
+        errors per channel) or ``ar(p=p_1,…)`` (an AR process per channel, its
+        order in the order of the measured channels). ``n_eff`` (channel →
+        effective independent samples) and, under AR, ``ar_coef`` are in ``extra``.
     """
 
     model: str
@@ -170,6 +183,9 @@ LL_SAMPLES = 2000
 PP_DRAWS = 20
 #: Draws simulated at once for the pointwise log-likelihood (memory: batch × N × channels).
 LL_BATCH = 24
+#: What the UKF's evidence is (it keeps its own iid measurement model).
+UKF_EVIDENCE_NOTE = ("innovation likelihood of the selected UKF run under the filter's own iid measurement "
+                     "model: not a marginal likelihood of the fit's noise model, not comparable with lsq/mcmc")
 
 
 def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | None = None) -> az.InferenceData:
@@ -198,6 +214,7 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         scores = score(record, {k: v[0] for k, v in sim.outputs.items()}, noise_sd=noise_sd)
     else:  # e.g. a UKF run chosen on another record that is unstable on this one: report, don't fail
         scores = {"mse": None, "force_errors": None, "force_nrmse": None, "rmse": None}
+    info = dict(post.info, **_noise_info(lik, post, sim))
     flat = post.draws.reshape(-1, post.draws.shape[-1])
     summary = FitSummary(
         model=lik.model.name, engine=post.engine, kind=lik.kind,
@@ -206,11 +223,30 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         log_evidence=post.log_evidence, mse=scores["mse"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], masked=int((~lik.valid).sum()), trained=post.trained,
         diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, post.point)), rmse=scores["rmse"],
-        noise_model="iid", extra={**post.info, "mse_channels": list(lik.channels)},
+        noise_model=info.pop("noise_model"), extra={**info, "mse_channels": list(lik.channels)},
     )
     ll, ll_index = pointwise_log_likelihood(lik, post)
     return make_inference_data(summary, post, names, units, record, log_likelihood=ll, ll_index=ll_index,
                                predictive=predictive_draws(lik, post))
+
+
+def _noise_info(lik: OutputError, post: Posterior, sim) -> dict:
+    """``noise_model``, ``n_eff`` (and ``ar_coef``, ``evidence_note``) of a fit, at its point estimate.
+
+    An engine that did not choose the AR orders (the UKF) has them chosen here
+    on its point's residual, so its pointwise log-likelihood is of the same model.
+    """
+    if not sim.ok.all():
+        if not lik.residual.resolved:
+            lik.residual = ResidualModel("ar", (0,) * len(lik.channels))
+        return {"noise_model": lik.residual.label()}
+    if not lik.residual.resolved:
+        lik.choose_residual_orders(lik.par.coords.to_phi(post.point))
+    yhat = np.stack([sim[c][0] for c in lik.channels], axis=-1)
+    out = describe_noise(lik.y - yhat, lik.valid, lik.residual, lik.channels)
+    if post.engine == "ukf":
+        out["evidence_note"] = UKF_EVIDENCE_NOTE
+    return out
 
 
 def pointwise_log_likelihood(lik: OutputError, post: Posterior) -> tuple[dict[str, np.ndarray], np.ndarray]:

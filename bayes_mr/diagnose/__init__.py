@@ -44,7 +44,8 @@ FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
 
 
 def select_baseline(record: xr.Dataset, forms: tuple[str, ...] | None = None, *,
-                    settings: LSQSettings = LSQSettings(), progress=None) -> tuple[Fit, list[dict]]:
+                    settings: LSQSettings = LSQSettings(), progress=None,
+                    noise: str = "iid") -> tuple[Fit, list[dict]]:
     """Fit each form and keep the one with the highest Laplace evidence.
 
     Parameters
@@ -67,7 +68,7 @@ def select_baseline(record: xr.Dataset, forms: tuple[str, ...] | None = None, *,
     for name in forms:
         t0 = _time.perf_counter()
         try:
-            f = fit_model(record, name, settings)
+            f = fit_model(record, name, settings, noise=noise)
         except (RuntimeError, ValueError) as exc:
             rows.append({"model": name, "log_evidence": None, "mse": None, "error": str(exc)})
             say(f"baseline {name}: failed ({exc})")
@@ -88,11 +89,9 @@ def diagnose(
     *,
     validate: xr.Dataset | str | os.PathLike | None = None,
     out_dir: str | os.PathLike | None = None,
-    seed: int = 0,
-    progress=True,
-    threshold: float = THRESHOLD,
+    seed: int = 0, progress=True, threshold: float = THRESHOLD,
     max_effects: int = 3,
-    settings: LSQSettings | None = None,
+    settings: LSQSettings | None = None, noise: str = "iid",
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -119,6 +118,8 @@ def diagnose(
         Most effects added by forward selection.
     settings : LSQSettings, optional
         Settings of the baseline fits.
+    noise : {"iid", "ar"}
+        Residual model of the fits (extensions keep the baseline's AR orders).
 
     Returns
     -------
@@ -138,9 +139,9 @@ def diagnose(
     if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
         raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
     if model is None:
-        base, baselines = select_baseline(record, settings=settings, progress=say)
+        base, baselines = select_baseline(record, settings=settings, progress=say, noise=noise)
     else:
-        base, baselines = fit_model(record, get_model(model), settings), None
+        base, baselines = fit_model(record, get_model(model), settings, noise=noise), None
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,

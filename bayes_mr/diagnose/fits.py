@@ -139,10 +139,10 @@ def _finish(lik: OutputError, res: LSQResult, record: xr.Dataset) -> Fit:
 
 
 def fit_model(record: xr.Dataset, model: Model | str, settings: LSQSettings = LSQSettings(),
-              *, progress=None) -> Fit:
+              *, progress=None, noise: str = "iid") -> Fit:
     """Least-squares fit of ``model`` from scratch (convex-screened starts, :func:`fit_lsq`),
-    taken to the profile-likelihood optimum (:func:`converge`)."""
-    lik = OutputError(get_model(model), record)
+    taken to the profile-likelihood optimum (:func:`converge`); ``noise`` is the residual model."""
+    lik = OutputError(get_model(model), record, residual=noise)
     res = fit_lsq(lik, settings, progress=progress)
     phi = converge(lik, res.phi)
     return _finish(lik, laplace(lik, phi, starts=res.starts, wall_s=res.wall_s), record)

@@ -1,14 +1,9 @@
 """Least-squares baseline: output-error fit, Laplace covariance and evidence.
 
-1. **Starting values by a convex sub-fit.** Given the *nonlinear* parameters
-   (σ of Dahl, ρ and n of Bouc–Wen, α of LuGre, effect shapes, …) the force
-   is linear in the others (c, k, F_d / k_z / β, ε, f0, k3, c_v): driving the
-   hysteresis with the measured motion gives regressors Φ(t), and
-   min ‖Φ θ_lin − f‖² over the plausible box is a small bounded convex
-   problem, solved with cvxpy (CLARABEL). The force target is the measured
-   force (device test) or −m·(absolute acceleration) (structure test).
-   Latin-hypercube candidates of the nonlinear parameters are screened this
-   way and the best become starts.
+1. **Starting values by a convex sub-fit** of the parameters the force is
+   linear in, given the nonlinear ones (:mod:`.subfit`): Latin-hypercube
+   candidates of the nonlinear parameters are screened this way and the best
+   become starts.
 2. **Output-error least squares** (``scipy.optimize.least_squares``, trust
    region reflective, bounded by the plausible box) on the simulation
    residuals in the estimation coordinates φ, from each start; residuals are
@@ -24,6 +19,17 @@
    bandwidth is where the residual autocorrelation dies out. The evidence is
    ln Z ≈ ln p(y|φ̂,σ̂) + ln p(φ̂) + ln p(σ̂) + ½(d+c) ln 2π + ½ ln|Σ_φ| − ½ Σ_c ln(2 N_c),
    with the same priors as :class:`~bayes_mr.likelihood.OutputError`.
+4. **Under the AR residual model** (``OutputError(..., residual="ar")``,
+   :mod:`bayes_mr.noise_model`) steps 1–2 are the first, iid fit; its
+   residual chooses each channel's AR order (BIC), and the re-weighted
+   refinement minimises the *prewhitened* residuals with profiled AR
+   coefficients — generalised least squares, the maximum of the conditional
+   AR likelihood. When the Ljung–Box test finds every channel's whitened
+   residual white (p ≥ :data:`WHITE_P`), Cov(φ) is the GLS (JᵀJ)⁻¹ of the
+   whitened residuals, with no sandwich; otherwise the HAC sandwich of the
+   whitened residuals. The evidence adds the AR coefficients' Laplace factor
+   (:func:`~bayes_mr.noise_model.coefficient_log_occam`) and counts N_c as
+   the conditional likelihood's terms.
 """
 
 from __future__ import annotations
@@ -34,23 +40,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize
-from scipy.stats import qmc
 
+from .. import noise_model
 from ..likelihood import OutputError
-from ..simulate import Inputs, simulate
 from ..stats import hac_bandwidth
+from .subfit import LinearSubfit, candidates, linear_names
 
-#: Parameters in which the restoring force is linear, given the hysteretic state.
-LINEAR_FORM = {
-    "normalized-bouc-wen": ("c", "k", "k_z"),
-    "dahl": ("c", "k", "F_d"),
-    "lugre": ("c", "k", "beta", "epsilon"),
-    "bouc-wen": ("c", "k"),
-    "spencer": (),
-}
-LINEAR_EFFECT = ("f0", "k3", "c_v")
-#: The form coefficient that scales the hysteretic force (not linear with a series dashpot).
-HYSTERETIC_COEF = {"normalized-bouc-wen": "k_z", "dahl": "F_d", "lugre": "beta"}
+__all__ = ["LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance", "laplace",
+           "linear_names"]
+
+#: Ljung–Box p-value above which a whitened residual counts as white (no HAC sandwich needed).
+WHITE_P = 0.01
 
 
 @dataclass(frozen=True)
@@ -114,148 +114,8 @@ class LSQResult:
     starts: list[dict] = field(default_factory=list)
     wall_s: float = 0.0
     hac_lag: int = 0
+    whiteness_p: float | None = None
 
-
-# --- convex sub-fit ----------------------------------------------------------------
-
-def linear_names(lik: OutputError) -> tuple[str, ...]:
-    """Free parameters the force is linear in (given the others)."""
-    model = lik.model
-    if lik.kind == "forced" or (lik.kind == "structure" and len(lik.channels) < 2):
-        return ()  # the sub-fit's force target needs the measured motion and acceleration of a full record
-    lin = list(LINEAR_FORM[model.form.name])
-    if lik.kind == "structure" and not model.form.frame_in_form:
-        lin = ["c", "k"]
-    if model.effect("low_velocity_rolloff") and HYSTERETIC_COEF.get(model.form.name) in lin:
-        lin.remove(HYSTERETIC_COEF[model.form.name])  # the series dashpot makes z depend on it
-    lin += [n for n in LINEAR_EFFECT if n in model.param_names(lik.kind)]
-    return tuple(n for n in lin if n in lik.par.names)
-
-
-def _motion(lik: OutputError) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Measured x, ẋ, voltage and the force target of the sub-fit."""
-    rec = lik.record
-    x = rec["displacement"].values
-    v = rec["voltage"].values if "voltage" in rec else np.zeros_like(x)
-    if lik.kind == "device":
-        return x, rec["velocity"].values, v, rec["force"].values
-    from ..data.derive import smooth_velocity
-
-    xd = smooth_velocity(x, float(rec.attrs["dt"]))
-    return x, xd, v, -float(rec.attrs["mass"]) * rec["acceleration"].values
-
-
-class LinearSubfit:
-    """Bounded convex fit of the linear parameters for given nonlinear ones."""
-
-    def __init__(self, lik: OutputError, stride: int | None = None):
-        import cvxpy as cp
-
-        self.lik = lik
-        self.lin = linear_names(lik)
-        names = lik.par.names
-        self.j_lin = np.array([names.index(n) for n in self.lin], int)
-        self.j_non = np.array([j for j in range(len(names)) if names[j] not in self.lin], int)
-        x, xd, v, f = _motion(lik)
-        # Enough samples for a well-posed regression, few enough to be quick.
-        self.stride = stride or max(1, lik.inputs.n // 20000)
-        self.valid = lik.valid
-        self.target = f
-        self.inputs = Inputs.device(x, xd, lik.inputs.dt, v)
-        self.frame = lik.kind == "structure" and not lik.model.form.frame_in_form
-        self.x, self.xd = x, xd
-        coords = lik.par.coords
-        self.lo = coords.lower[self.j_lin]
-        self.hi = coords.upper[self.j_lin]
-        self.ref = np.maximum(np.abs(self.lo), np.abs(self.hi))
-        p = len(self.lin)
-        self._R = cp.Parameter((p, p))
-        self._b = cp.Parameter(p)
-        self._u = cp.Variable(p)
-        self._prob = cp.Problem(
-            cp.Minimize(cp.sum_squares(self._R @ self._u - self._b)),
-            [self._u >= self.lo / self.ref, self._u <= self.hi / self.ref],
-        )
-
-    def _device_theta(self, theta_full: np.ndarray) -> np.ndarray:
-        """Device-test parameter vector of the same law (drops a structure frame)."""
-        return theta_full[2:] if self.frame else theta_full
-
-    def regressors(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Φ (n, p_lin), offset force f_rest (n,)) at the nonlinear values in ``phi``."""
-        names = self.lik.model.param_names(self.lik.kind)
-        full = self.lik.par.full(phi)
-        lin_full = [names.index(n) for n in self.lin]
-        base = full.copy()
-        base[lin_full] = 0.0
-        batch = [base]
-        for j in lin_full:
-            e = base.copy()
-            e[j] = 1.0
-            batch.append(e)
-        batch = np.array(batch)
-        frame_cols = []
-        if self.frame:
-            # frame c, k of a structure test enter as c ẋ + k x outside the device law
-            frame_cols = [n for n in ("c", "k") if n in self.lin]
-            keep = [i for i, n in enumerate(self.lin) if n not in ("c", "k")]
-            batch = np.array([self._device_theta(b) for b in batch[[0] + [1 + i for i in keep]]])
-        dev_model = self.lik.model
-        sim = simulate(dev_model, self.inputs, batch)
-        f = sim["force"]
-        cols = [f[i] - f[0] for i in range(1, f.shape[0])]
-        if self.frame:
-            extra = {"c": self.xd, "k": self.x}
-            order = [n for n in self.lin if n not in ("c", "k")]
-            lookup = dict(zip(order, cols))
-            lookup.update({n: extra[n] for n in frame_cols})
-            cols = [lookup[n] for n in self.lin]
-        return np.column_stack(cols), f[0]
-
-    def solve(self, phi: np.ndarray) -> tuple[np.ndarray, float]:
-        """φ with its linear parameters replaced by the bounded LS optimum, and the cost.
-
-        The cost is the mean squared force residual over valid samples [N²].
-        """
-        Phi, rest = self.regressors(phi)
-        sel = self.valid & (np.arange(self.valid.size) % self.stride == 0)
-        A = Phi[sel] * self.ref  # columns scaled so that the unknowns u = θ/ref are O(1)
-        b = self.target[sel] - rest[sel]
-        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
-            return phi, np.inf
-        Q, R = np.linalg.qr(A)
-        self._R.value = R
-        self._b.value = Q.T @ b
-        try:
-            self._prob.solve(solver="CLARABEL")
-        except Exception:  # a failed convex solve only drops this candidate
-            return phi, np.inf
-        if self._u.value is None:
-            return phi, np.inf
-        theta_lin = np.clip(self._u.value * self.ref, self.lo, self.hi)
-        out = np.array(phi, float)
-        coords = self.lik.par.coords
-        for k, j in enumerate(self.j_lin):
-            th = theta_lin[k]
-            if coords.log[j]:
-                th = max(th, coords.lower[j])
-                out[j] = math.log(coords.scale[j] * th)
-            else:
-                out[j] = coords.scale[j] * th
-        cost = float(np.mean((A @ (theta_lin / self.ref) - b) ** 2))
-        return out, cost
-
-
-def candidates(lik: OutputError, n: int, seed: int) -> np.ndarray:
-    """Candidate starts φ, shape (n + 1, p): the model's published/thesis
-    defaults (clipped into the box) and ``n`` Latin-hypercube samples of it."""
-    sampler = qmc.LatinHypercube(d=lik.n_params, seed=np.random.default_rng(seed))
-    u = sampler.random(n)
-    specs = {s.name: s for s in lik.model.free_specs(lik.kind)}
-    default = np.array([specs[name].default for name in lik.par.names])
-    coords = lik.par.coords
-    default = np.clip(default, coords.lower, coords.upper)
-    return np.vstack([coords.to_phi(default), lik.phi_lo + u * (lik.phi_hi - lik.phi_lo)])
 
 
 # --- covariance -------------------------------------------------------------------------
@@ -297,8 +157,15 @@ def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, 
 
 # --- nonlinear least squares -----------------------------------------------------------
 
+def _standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
+    if lik.residual.kind == "iid":
+        return (lik.y[lik.valid] - yhat[lik.valid]) / sd
+    return lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))[lik.valid] / sd
+
+
 class _Residuals:
-    """Standardised residual vector and its finite-difference Jacobian."""
+    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian."""
 
     def __init__(self, lik: OutputError, sd: np.ndarray):
         self.lik = lik
@@ -308,7 +175,7 @@ class _Residuals:
     def __call__(self, phi):
         yhat, sim = self.lik.predict(phi)
         self.schedule = sim.schedule[0]
-        r = (self.lik.y[self.lik.valid] - yhat[0][self.lik.valid]) / self.sd
+        r = _standardised(self.lik, yhat[0], self.sd)
         if not sim.ok[0] or not np.all(np.isfinite(r)):
             # a diverged simulation is a very bad fit (worse than predicting zero), not a crash
             worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
@@ -328,8 +195,7 @@ class _Residuals:
         if self.schedule is None:
             self(phi)
         yhat, _ = self.lik.predict(np.array(batch), schedule=self.schedule)
-        v = self.lik.valid
-        r = [((self.lik.y[v] - yh[v]) / self.sd).ravel() for yh in yhat]
+        r = [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
         # a perturbed simulation that diverges says nothing about the slope: treat it as flat
         r = [ri if np.all(np.isfinite(ri)) else r[0] for ri in r]
         if not np.all(np.isfinite(r[0])):
@@ -392,25 +258,50 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         say(f"start {i + 1}/{len(starts)}: cost {res.cost:.4g}")
     best = min(runs, key=lambda r: r["cost"])
     phi = best["phi"]
+    if lik.residual.kind == "ar" and not lik.residual.resolved:
+        say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
         yhat, _ = lik.predict(phi)
-        resid = (lik.y - yhat[0])[lik.valid]
-        sd = np.maximum(np.sqrt(np.mean(resid**2, axis=0)), 1e-12 * np.std(lik.y[lik.valid], axis=0))
+        sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
         res = _refine(lik, phi, sd, settings.max_nfev)
         phi = res.x
     return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0)
 
 
+def _ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:
+    """Maximum-likelihood σ_c at a prediction (N, C): the residual RMS, under AR the innovation RMS."""
+    if lik.residual.kind == "iid":
+        return np.sqrt(np.mean((lik.y - yhat)[lik.valid] ** 2, axis=0))
+    white = lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))
+    return np.sqrt(np.sum(white**2, axis=0) / noise_model.counts(lik.valid, lik.residual.orders))
+
+
+def _ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[float, float, np.ndarray, float]:
+    """Under the AR model: (ln p(y|φ̂,σ̂), the AR coefficients' Laplace factor, the terms per channel,
+    the smallest Ljung–Box p-value of the channels' whitened residuals)."""
+    orders = lik.residual.orders
+    full = np.where(lik.valid[:, None], lik.y - yhat, 0.0)
+    white = lik.whiten(full)
+    loglik = float(lik.log_density(yhat[None], sigma[None], np.array([True]))[0])
+    occam = noise_model.coefficient_log_occam(full, lik.valid, orders, sigma)
+    p_white = min(noise_model.ljung_box(white[noise_model.usable(lik.valid, p), c], p)
+                  for c, p in enumerate(orders))
+    return loglik, occam, noise_model.counts(lik.valid, orders), p_white
+
+
 def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0) -> LSQResult:
-    """Laplace covariance and evidence of ``lik`` at φ (an optimum)."""
+    """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model."""
     yhat, _ = lik.predict(phi)
     resid = (lik.y - yhat[0])[lik.valid]
     n_c = resid.shape[0]
     sampled = lik.noise == "sampled"
+    ar = lik.residual.kind == "ar"
+    if ar:
+        lik.choose_residual_orders(phi)
     if sampled:
-        # σ_c at its maximum-likelihood value, the residual RMS
+        # σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
         floor = 1e-12 * np.std(lik.y[lik.valid], axis=0)
-        sigma = np.maximum(np.sqrt(np.mean(resid**2, axis=0)), floor)
+        sigma = np.maximum(_ml_sd(lik, yhat[0]), floor)
     else:
         sigma = np.asarray(lik.noise_sd, float)
     rf = _Residuals(lik, sigma)
@@ -420,16 +311,23 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     cov_iid = np.linalg.pinv(JtJ)
     eig = np.linalg.eigvalsh(JtJ)
     logdet = -float(np.sum(np.log(np.clip(eig, 1e-300, None))))
-    cov, lag = hac_covariance(J, r, n_c)
-    loglik = float(np.sum(-0.5 * (resid / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2 * math.pi)))
+    p_white, occam, n_terms = None, 0.0, np.full(sigma.size, n_c)
+    if ar:
+        loglik, occam, n_terms, p_white = _ar_terms(lik, yhat[0], sigma)
+    else:
+        loglik = float(np.sum(-0.5 * (resid / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2 * math.pi)))
+    if ar and p_white >= WHITE_P:
+        cov, lag = cov_iid, 0  # the AR model whitened the residual: GLS needs no sandwich
+    else:
+        cov, lag = hac_covariance(J, r, n_c)
     d = phi.size
     log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo)))
-    log_z = loglik + log_prior + 0.5 * d * math.log(2 * math.pi) + 0.5 * logdet
+    log_z = loglik + log_prior + 0.5 * d * math.log(2 * math.pi) + 0.5 * logdet + occam
     if sampled:
         # log-uniform σ prior, and the Gaussian integral over ln σ_c (curvature 2 N_c at the optimum)
         c = sigma.size
         log_z += -float(np.sum(lik.log_sigma_hi - lik.log_sigma_lo)) + 0.5 * c * math.log(2 * math.pi)
-        log_z -= 0.5 * c * math.log(2.0 * n_c)
+        log_z -= 0.5 * c * math.log(2.0 * n_c) if not ar else 0.5 * float(np.sum(np.log(2.0 * n_terms)))
     coords = lik.par.coords
     theta = coords.to_theta(phi)
     sd_phi = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -446,4 +344,5 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         starts=list(starts or []),
         wall_s=wall_s,
         hac_lag=lag,
+        whiteness_p=p_white,
     )

@@ -129,3 +129,80 @@ def test_laplace_evidence_equals_analytic_evidence_on_linear_gaussian_model():
     log_prior_theta = -float(np.sum(np.log(theta_hat) + np.log(lik.phi_hi - lik.phi_lo)))
     log_z = log_norm - 0.5 * rss + math.log(2 * math.pi) - 0.5 * np.linalg.slogdet(AtA)[1] + log_prior_theta
     assert res.log_evidence == pytest.approx(log_z, abs=0.05)
+
+
+def _ar1_output_noise_record(seed: int, a: float = 0.9, level: float = 0.02):
+    """A noise-free Dahl structure test with AR(1) noise (coefficient ``a``, SD ``level`` × SD) on each output."""
+    from scipy.signal import lfilter
+
+    from bayes_mr.signals import make_signal
+    from bayes_mr.simulate import synthesize
+
+    model = get_model("dahl")
+    theta = model.theta("structure", {"c": 100.0, "k": 2.0e4, "F_d": 25.0, "sigma": 2500.0})
+    sig = make_signal("blwn", duration=4.0, fs=500.0, amplitude=1.0, fmax=8.0, seed=seed)
+    rec = synthesize(model, theta, sig.time, sig.as_input("structure"), mass=50.0, noise=0.0, seed=seed)
+    rng = np.random.default_rng(100 + seed)
+    for c in ("displacement", "acceleration"):
+        y = rec[c].values
+        sd = level * y.std()
+        e = lfilter([1.0], [1.0, -a], rng.standard_normal(y.size)) * sd * np.sqrt(1 - a * a)
+        rec[c] = ("time", y + e, rec[c].attrs)
+        rec.attrs[f"noise_sd_{c}"] = sd
+    names = model.free_names("structure")
+    return rec, dict(zip(names, theta[[model.param_names("structure").index(n) for n in names]]))
+
+
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
+def test_gls_under_the_ar_model_covers_the_truth_where_iid_intervals_are_too_narrow(seed):
+    """AR(1) output noise (a = 0.9): the AR fit chooses p ≥ 1, whitens the residual (Ljung–Box) and its
+    GLS intervals hold c, k, F_d within 3 SD; the iid likelihood's own (JᵀJ)⁻¹ intervals are several
+    times narrower. (The Dahl shape σ is left out: on some of these short records the optimiser stops
+    at another σ under both residual models alike — a search failure, not a width.)"""
+    rec, truth = _ar1_output_noise_record(seed)
+    settings = LSQSettings(n_candidates=16, n_starts=2)
+    lik = OutputError("dahl", rec, residual="ar")
+    res = fit_lsq(lik, settings)
+    assert all(p >= 1 for p in lik.residual.orders) and res.whiteness_p >= 0.01 and res.hac_lag == 0
+    iid = fit_lsq(OutputError("dahl", rec), settings)
+    coords = lik.par.coords
+    for name in ("c", "k", "F_d"):
+        j = coords.names.index(name)
+        z_ar = (res.theta[name] - truth[name]) / res.sd_theta[name]
+        assert abs(z_ar) <= 3.0, (name, z_ar)
+        sd_iid = np.sqrt(iid.cov_phi_iid[j, j]) * (iid.theta[name] if coords.log[j] else 1 / coords.scale[j])
+        assert res.sd_theta[name] > 2.0 * sd_iid, (name, res.sd_theta[name], sd_iid)
+
+
+@pytest.mark.slow
+def test_calibration_of_iid_and_ar_intervals_with_input_noise():
+    """Why the default stays ``iid``: 20 Dahl structure records (parameters ×0.7…1.4 of the defaults,
+    8 s at 500 Hz, 1 % noise by ``synthesize`` on the felt input and the outputs, plus 2 % white noise on
+    the recorded input), the fraction of true parameters inside least squares' 90 % interval under each
+    residual model. Measured (issue 14): iid 49/80 = 0.61, ar 35/80 = 0.44: on input noise the AR
+    whitening (a high-pass) weights the band where the noise-dithered response departs from the model, and
+    the GLS estimate of the Dahl shape moves away from the truth."""
+    from scipy.stats import norm
+
+    from bayes_mr.signals import make_signal
+    from bayes_mr.simulate import synthesize
+
+    model, z90 = get_model("dahl"), norm.ppf(0.95)
+    names = model.free_names("structure")
+    base = dict(zip(model.param_names("structure"), model.theta("structure")))
+    hits = {"iid": [], "ar": []}
+    for s in range(20):
+        rng = np.random.default_rng(500 + s)
+        values = {n: base[n] * f for n, f in zip(names, rng.uniform(0.7, 1.4, len(names)))}
+        sig = make_signal("blwn", duration=8.0, fs=500.0, amplitude=1.0, fmax=8.0, seed=s)
+        rec = synthesize(model, model.theta("structure", values), sig.time, sig.as_input("structure"),
+                         mass=50.0, noise=0.01, seed=1000 + s)
+        ag = rec["ground_acceleration"]
+        rec["ground_acceleration"] = ("time", ag.values + 0.02 * np.sqrt(np.mean(ag.values**2))
+                                      * rng.standard_normal(ag.size), ag.attrs)
+        for kind in hits:
+            res = fit_lsq(OutputError("dahl", rec, residual=kind))
+            hits[kind] += [abs(res.theta[n] - values[n]) <= z90 * res.sd_theta[n] for n in names]
+    coverage = {k: float(np.mean(v)) for k, v in hits.items()}
+    print("90 % interval coverage:", coverage)
+    assert coverage["iid"] >= coverage["ar"], coverage
