@@ -289,6 +289,33 @@ def _ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[fl
     return loglik, occam, noise_model.counts(lik.valid, orders), p_white
 
 
+def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
+    """ln of the Laplace posterior volume, each direction bounded by the prior box.
+
+    The Laplace evidence multiplies the likelihood's peak by the volume
+    (2π)^{d/2} |JᵀJ|^{-1/2} = Π_i √(2π) σ_i over the eigen-directions v_i of JᵀJ
+    (σ_i = λ_i^{-1/2}). A direction the data cannot see has λ_i → 0 and an
+    unbounded σ_i, yet the prior is uniform on a box: the likelihood cannot be
+    integrated over more than the box's extent along v_i,
+    w_i = Σ_j |v_ij| (hi_j − lo_j). Each direction therefore contributes
+    min(√(2π) σ_i, w_i), so an unidentified parameter gains nothing (its ln w
+    cancels its prior's −ln w) instead of up to ~345 nats from a clipped
+    eigenvalue.
+
+    Parameters
+    ----------
+    JtJ : ndarray, shape (d, d)
+        Gauss–Newton information of the standardised residuals in φ.
+    widths : ndarray, shape (d,)
+        Prior box widths hi − lo in φ.
+    """
+    eig, vec = np.linalg.eigh(JtJ)
+    with np.errstate(divide="ignore"):
+        gauss = 0.5 * math.log(2 * math.pi) - 0.5 * np.log(np.clip(eig, 0.0, None))
+    box = np.log(np.abs(vec).T @ np.asarray(widths, float))
+    return float(np.sum(np.minimum(gauss, box)))
+
+
 def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0) -> LSQResult:
     """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model."""
     yhat, _ = lik.predict(phi)
@@ -309,8 +336,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     J = rf.jacobian(phi, central=True)
     JtJ = J.T @ J
     cov_iid = np.linalg.pinv(JtJ)
-    eig = np.linalg.eigvalsh(JtJ)
-    logdet = -float(np.sum(np.log(np.clip(eig, 1e-300, None))))
+    log_volume = posterior_log_volume(JtJ, lik.phi_hi - lik.phi_lo)
     p_white, occam, n_terms = None, 0.0, np.full(sigma.size, n_c)
     if ar:
         loglik, occam, n_terms, p_white = _ar_terms(lik, yhat[0], sigma)
@@ -320,9 +346,8 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         cov, lag = cov_iid, 0  # the AR model whitened the residual: GLS needs no sandwich
     else:
         cov, lag = hac_covariance(J, r, n_c)
-    d = phi.size
     log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo)))
-    log_z = loglik + log_prior + 0.5 * d * math.log(2 * math.pi) + 0.5 * logdet + occam
+    log_z = loglik + log_prior + log_volume + occam
     if sampled:
         # log-uniform σ prior, and the Gaussian integral over ln σ_c (curvature 2 N_c at the optimum)
         c = sigma.size

@@ -206,3 +206,21 @@ def test_calibration_of_iid_and_ar_intervals_with_input_noise():
     coverage = {k: float(np.mean(v)) for k, v in hits.items()}
     print("90 % interval coverage:", coverage)
     assert coverage["iid"] >= coverage["ar"], coverage
+
+
+def test_laplace_evidence_gives_an_unidentified_parameter_nothing():
+    """dahl vs dahl+voltage_dependence on a record with no voltage: the effect's parameters do not touch the
+    output, so ln L is the same and ln Z must not grow (it grew by ~1000 nats when a flat direction's
+    eigenvalue was clipped at 1e-300 and counted as a huge posterior width)."""
+    from bayes_mr.inference.lsq import LSQSettings, fit_lsq, posterior_log_volume
+    from bayes_mr.likelihood import OutputError
+    from records import offset_device_record
+
+    rec = offset_device_record(1.0, offset=0.0)
+    base = fit_lsq(OutputError("dahl", rec), LSQSettings(seed=0))
+    ext = fit_lsq(OutputError("dahl+voltage_dependence", rec), LSQSettings(seed=0))
+    assert ext.log_likelihood == pytest.approx(base.log_likelihood, abs=0.5)
+    assert ext.log_evidence - base.log_evidence < 0.5
+    # the bound itself: an exactly flat direction contributes the box width, a sharp one √(2π)σ
+    vol = posterior_log_volume(np.diag([1e6, 0.0]), np.array([10.0, 3.0]))
+    assert vol == pytest.approx(0.5 * np.log(2 * np.pi / 1e6) + np.log(3.0))
