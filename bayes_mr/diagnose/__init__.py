@@ -93,6 +93,7 @@ def diagnose(
     threshold: float = THRESHOLD,
     max_effects: int = 3,
     settings: LSQSettings | None = None,
+    executor=None,
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -119,6 +120,9 @@ def diagnose(
         Most effects added by forward selection.
     settings : LSQSettings, optional
         Settings of the baseline fits.
+    executor : object, optional
+        Fits the candidate effects as parallel jobs (a ``concurrent.futures``
+        executor or a dask Client, :mod:`bayes_mr.executor`); same result.
 
     Returns
     -------
@@ -144,7 +148,7 @@ def diagnose(
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
-                                      progress=say)
+                                      progress=say, executor=executor)
     ext = selected[-1].fit if selected else base
     after = residual_views(record, ext.predicted) if selected else before
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
