@@ -24,6 +24,11 @@ training chunks all go through this one interface:
   raised again; a job already running on a worker cannot be stopped from
   here and its result is dropped.
 
+A process pool must start its workers with ``spawn`` (or ``forkserver``):
+``ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"))``.
+A forked child of a process whose compiled kernels have run (GNU OpenMP) is
+terminated, and every job it held becomes a row with its error.
+
 On an executor each job runs with one numba thread: the executor's workers are
 the parallelism, and the compiled kernels would otherwise start one thread per
 core in every worker. Thread counts do not change any result (every batched
@@ -33,6 +38,7 @@ kernel computes its members independently).
 from __future__ import annotations
 
 import contextlib
+import logging
 import time as _time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -243,7 +249,9 @@ def open_executor(scheduler: str | None = None, workers: int | None = None) -> I
         return
     if workers < 1:
         raise ValueError(f"--workers must be ≥ 1, got {workers}")
-    # dashboard on a free port: two commands on one machine do not fight over 8787
-    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    # dashboard on a free port: two commands on one machine do not fight over 8787; only errors are logged
+    # (a worker slow to exit at close is killed with a warning that says nothing about the results)
+    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=logging.ERROR) as cluster:
         with Client(cluster) as client:
             yield client
