@@ -121,8 +121,7 @@ def diagnose(
     settings : LSQSettings, optional
         Settings of the baseline fits.
     executor : object, optional
-        Fits the candidate effects as parallel jobs (a ``concurrent.futures``
-        executor or a dask Client, :mod:`bayes_mr.executor`); same result.
+        Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
 
     Returns
     -------
@@ -139,12 +138,7 @@ def diagnose(
     t0 = _time.perf_counter()
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
-    if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
-        raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
-    if model is None:
-        base, baselines = select_baseline(record, settings=settings, progress=say)
-    else:
-        base, baselines = fit_model(record, get_model(model), settings), None
+    base, baselines = _baseline(record, model, settings, say)
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
@@ -166,6 +160,15 @@ def diagnose(
     if out_dir is not None:
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return out
+
+
+def _baseline(record: xr.Dataset, model, settings: LSQSettings, say) -> tuple[Fit, list[dict] | None]:
+    """The baseline fit (``model``, or the form of highest evidence) and the form comparison (None if given)."""
+    if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
+        raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
+    if model is None:
+        return select_baseline(record, settings=settings, progress=say)
+    return fit_model(record, get_model(model), settings), None
 
 
 def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], rounds, validation,
