@@ -64,6 +64,13 @@ def _read(path: str, args, *, what: str = "record"):
     )
 
 
+def _executor(args):
+    """The executor of ``--scheduler`` / ``--workers`` (a context: a local cluster is closed after)."""
+    from .executor import open_executor
+
+    return open_executor(scheduler=args.scheduler, workers=args.workers)
+
+
 def _write_json(data: dict, path: str | None) -> None:
     import json
 
@@ -156,9 +163,13 @@ def cmd_fit(args) -> int:
             raise CLIError("--validate chooses among trained UKF runs (thesis method 2): use it with --engine ukf, "
                            "or score a fit on another record with `bayes-mr validate RESULT.nc DATA2`")
         options["validate_on"] = _read(args.validate, args)
-    job = Identify(args.model, engine(args.engine, **options), ranges=_ranges(args.prior),
-                   fixed=_floats(args.fix, "--fix"), noise=args.noise)
-    idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
+    if (args.scheduler or args.workers is not None) and args.engine != "ukf":
+        raise CLIError("--scheduler/--workers spread UKF training runs: use them with --engine ukf (or compare)")
+    with _executor(args) as ex:
+        options.update({"executor": ex} if ex is not None else {})
+        job = Identify(args.model, engine(args.engine, **options), ranges=_ranges(args.prior),
+                       fixed=_floats(args.fix, "--fix"), noise=args.noise)
+        idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
     summary = results.summary_of(idata).to_dict()
     if args.output:
         results.save(idata, args.output)
@@ -186,9 +197,10 @@ def cmd_compare(args) -> int:
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else None
-    out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
-                  progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,
-                  noise=args.noise)
+    with _executor(args) as ex:
+        out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
+                      progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,
+                      executor=ex, noise=args.noise)
     out.pop("idata")
     print(markdown_table(table(out)), file=sys.stderr)
     if out["selected"]:
@@ -202,8 +214,9 @@ def cmd_diagnose(args) -> int:
 
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None
-    out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
-                   progress=progress_say(on_terminal(not args.quiet)), noise=args.noise)
+    with _executor(args) as ex:
+        out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
+                       progress=progress_say(on_terminal(not args.quiet)), executor=ex, noise=args.noise)
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
           f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
           file=sys.stderr)
@@ -233,6 +246,7 @@ def study_names() -> list[str]:
 
 def cmd_study(args) -> int:
     import importlib.util
+    import inspect
 
     names = study_names()
     if args.name in (None, "list"):
@@ -245,7 +259,11 @@ def cmd_study(args) -> int:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     out = args.out or str(Path("results") / "studies" / args.name)
-    summary = module.main(out_dir=out, quick=args.quick, seed=args.seed)
+    takes = "executor" in inspect.signature(module.main).parameters
+    if (args.scheduler or args.workers is not None) and not takes:
+        raise CLIError(f"study {args.name} runs in one process: it takes no --scheduler/--workers")
+    with _executor(args) as ex:
+        summary = module.main(out_dir=out, quick=args.quick, seed=args.seed, **({"executor": ex} if takes else {}))
     _write_json(summary, args.json)
     return 0
 
@@ -298,6 +316,13 @@ def _job_flags(p: argparse.ArgumentParser, *, out: str | None, json: tuple[str, 
     _common_data_flags(p)
 
 
+def _executor_flags(p: argparse.ArgumentParser, what: str) -> None:
+    """``--scheduler ADDRESS`` / ``--workers N``: where the command's grid of jobs (``what``) runs."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--scheduler", metavar="ADDRESS", help=f"run {what} on this Dask scheduler's cluster (tcp://HOST:8786)")
+    g.add_argument("--workers", type=int, metavar="N", help=f"run {what} on a local cluster of N processes, closed after")
+
+
 def _no_readme_flag(p: argparse.ArgumentParser) -> None:
     # kept so scripts and Makefiles written for earlier versions still run: the command never writes README.md
     p.add_argument("--no-readme", action="store_true",
@@ -348,6 +373,7 @@ def _fit_parsers(sub, forms: str) -> None:
     p.add_argument("--prior", action="append", metavar="NAME=LO:HI", help="plausible range of a parameter [SI]")
     p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="hold a parameter fixed [SI]")
     p.add_argument("-o", "--output", metavar="RESULT.nc", help="write the full result")
+    _executor_flags(p, "the UKF's training runs (--engine ukf)")
     _job_flags(p, out=None, json=("SUMMARY.json", "write the summary here (default: stdout)"))
 
     p = sub.add_parser("validate", help="predict another record with a fitted model (thesis method 2)",
@@ -372,6 +398,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
     p.add_argument("--ukf-lhs", type=int, metavar="N",
                    help="Latin-hypercube priors per index of dispersion for the UKF (default 10: 100 priors)")
+    _executor_flags(p, "the models × engines fits")
     _job_flags(p, out="also write every fit as netCDF and the table as CSV here",
                json=("OUT.json", "write the comparison here (default: stdout)"))
 
@@ -381,6 +408,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
+    _executor_flags(p, "the candidate effects' fits")
     _job_flags(p, out="write the Markdown report and figures here",
                json=("REPORT.json", "write the report here (default: stdout)"))
 
@@ -405,6 +433,7 @@ def _job_parsers(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="output folder (default results/studies/NAME)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--json", metavar="OUT.json", help="write the study's summary here (default: stdout)")
+    _executor_flags(p, "the study's grid (studies whose main takes an executor)")
 
     p = sub.add_parser("bench", help="the performance benchmark (UKF vs filterpy, training, MCMC, LSQ)",
                        description="Measure the UKF per step against filterpy on the same model and data, a "

@@ -32,6 +32,7 @@ import pandas as pd
 import xarray as xr
 
 from . import results
+from .executor import Outcome, run_jobs, share
 from .identify import Identify
 from .inference.estimators import engine
 from .identify import validate as validate_fit
@@ -81,15 +82,20 @@ def crosscheck(ukf_idata, mcmc_idata) -> dict[str, dict[str, float]]:
     return out
 
 
-def _fit_row(job: Identify, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
-             progress) -> tuple[dict, object]:
-    """(row, InferenceData) of one model × engine; a failed fit is a row with ``error`` and no result."""
+def fit_job(model: str, estimator, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
+            progress: bool, noise: str = "iid") -> tuple[dict, object]:
+    """(row, InferenceData) of one model × engine; a failed fit is a row with ``error`` and no result.
+
+    Module level with picklable arguments and result, so that any executor
+    can run it (:mod:`bayes_mr.executor`); the seed is the comparison's own,
+    never the order jobs finish in.
+    """
     t0 = _time.perf_counter()
-    name = get_model(job.model).name
+    name = get_model(model).name
     try:
-        idata = job.fit(record, seed=seed, progress=bool(progress))
+        idata = Identify(model, estimator, noise=noise).fit(record, seed=seed, progress=progress)
     except (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        return {"model": name, "engine": job.estimator.name, "error": f"{type(exc).__name__}: {exc}",
+        return {"model": name, "engine": estimator.name, "error": f"{type(exc).__name__}: {exc}",
                 "wall_s": _time.perf_counter() - t0}, None
     row = results.summary_of(idata).to_dict()
     if validate is not None:
@@ -107,8 +113,12 @@ def compare(
     *,
     engines: Sequence[str] = ("lsq", "mcmc", "ukf"),
     validate: xr.Dataset | None = None,
-    seed: int = 0, progress=True, out_dir: str | Path | None = None,
-    estimators: dict | None = None, noise: str = "iid",
+    seed: int = 0,
+    progress=True,
+    out_dir: str | Path | None = None,
+    estimators: dict | None = None,
+    executor=None,
+    noise: str = "iid",
 ) -> dict:
     """Fit every model with every engine and compare.
 
@@ -129,6 +139,10 @@ def compare(
     estimators : dict, optional
         Engine name → configured estimator (e.g. ``{"ukf": UKF(n_lhs=4)}``)
         overriding the defaults of :func:`bayes_mr.inference.estimators.engine`.
+    executor : object, optional
+        Runs the model × engine fits as jobs (a ``concurrent.futures``
+        executor or a ``dask.distributed.Client``, :mod:`bayes_mr.executor`);
+        the result is the same as in process.
     noise : {"iid", "ar"}
         Residual model of every fit (``Identify.noise``).
 
@@ -148,22 +162,11 @@ def compare(
     for e in engines:
         engine(e)  # validates the name
     estimators = dict(estimators or {})
-    rows: list[dict] = []
-    fits: dict[tuple[str, str], object] = {}
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
-    for m in models:
-        for e in engines:
-            say(f"{m} × {e} …")
-            row, idata = _fit_row(Identify(m, estimators.get(e) or engine(e), noise=noise), record, validate, seed, progress)
-            rows.append(row)
-            if idata is None:
-                say(f"{m} × {e}: failed ({row['error']})")
-                continue
-            fits[(m, e)] = idata
-            if out_dir is not None:
-                results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")
-            say(f"{m} × {e}: ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s")
+    pairs = [(m, e) for m in models for e in engines]
+    rows, fits = _run_grid(pairs, record, validate, seed, estimators, executor=executor, say=say,
+                           progress=bool(progress) and executor is None, out_dir=out_dir, noise=noise)
 
     eng, route = selection_route(rows, models)
     selected, factors = None, {}
@@ -180,6 +183,40 @@ def compare(
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     out["idata"] = fits
     return out
+
+
+def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: int, estimators: dict, *,
+              executor, say, progress: bool, out_dir, noise: str = "iid") -> tuple[list[dict], dict]:
+    """Fit every (model, engine) of ``pairs``; rows in the order of ``pairs``, fits by pair."""
+    rec, val = share(executor, record), (share(executor, validate) if validate is not None else None)
+    jobs = [(m, estimators.get(e) or engine(e), rec, val, seed, progress, noise) for m, e in pairs]
+    n_done = [0]
+
+    def started(i: int) -> None:
+        if executor is None:
+            say(f"{pairs[i][0]} × {pairs[i][1]} …")
+
+    def finished(o: Outcome) -> None:  # as each job finishes: report it, write its fit
+        (m, e), n_done[0] = pairs[o.index], n_done[0] + 1
+        row, idata = o.value if o.ok else ({"error": o.error}, None)
+        if idata is None:
+            say(f"{m} × {e}: failed ({row['error']}) [{n_done[0]}/{len(pairs)}]")
+            return
+        if out_dir is not None:
+            results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")
+        say(f"{m} × {e}: ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s "
+            f"[{n_done[0]}/{len(pairs)}]")
+
+    if executor is not None:
+        say(f"{len(pairs)} fits on {type(executor).__name__} …")
+    outcomes = run_jobs(fit_job, jobs, executor=executor, on_start=started, on_done=finished)
+    rows, fits = [], {}
+    for (m, e), o in zip(pairs, outcomes):
+        row, idata = o.value if o.ok else ({"model": m, "engine": e, "error": o.error, "wall_s": o.wall_s}, None)
+        rows.append(row)
+        if idata is not None:
+            fits[(m, e)] = idata
+    return rows, fits
 
 
 def table(out: dict) -> pd.DataFrame:

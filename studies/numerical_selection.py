@@ -71,11 +71,13 @@ def records(quick: bool, seed: int):
     return out
 
 
-def main(out_dir: str | Path = "results/studies/numerical-selection", quick: bool = False, seed: int = 0) -> dict:
+def main(out_dir: str | Path = "results/studies/numerical-selection", quick: bool = False, seed: int = 0,
+         executor=None) -> dict:
     out = Path(out_dir)
     fig_dir = out / "figures"
     recs = records(quick, seed)
     kw = dict(n_lhs=3, taus=(0.01, 0.1, 0.5)) if quick else dict(n_lhs=10, taus=TAUS)
+    kw["executor"] = executor  # `bayes-mr study … --workers N`: training runs on a cluster, same numbers
     trials, trainings = {}, {}
     for model in CANDIDATES:
         for sig in ("I", "II"):

@@ -92,6 +92,7 @@ def diagnose(
     seed: int = 0, progress=True, threshold: float = THRESHOLD,
     max_effects: int = 3,
     settings: LSQSettings | None = None, noise: str = "iid",
+    executor=None,
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -120,6 +121,8 @@ def diagnose(
         Settings of the baseline fits.
     noise : {"iid", "ar"}
         Residual model of the fits (extensions keep the baseline's AR orders).
+    executor : object, optional
+        Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
 
     Returns
     -------
@@ -136,16 +139,11 @@ def diagnose(
     t0 = _time.perf_counter()
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
-    if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
-        raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
-    if model is None:
-        base, baselines = select_baseline(record, settings=settings, progress=say, noise=noise)
-    else:
-        base, baselines = fit_model(record, get_model(model), settings, noise=noise), None
+    base, baselines = _baseline(record, model, settings, say, noise)
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
-                                      progress=say)
+                                      progress=say, executor=executor)
     ext = selected[-1].fit if selected else base
     after = residual_views(record, ext.predicted) if selected else before
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
@@ -163,6 +161,16 @@ def diagnose(
     if out_dir is not None:
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return out
+
+
+def _baseline(record: xr.Dataset, model, settings: LSQSettings, say,
+              noise: str = "iid") -> tuple[Fit, list[dict] | None]:
+    """The baseline fit (``model``, or the form of highest evidence) and the form comparison (None if given)."""
+    if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
+        raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
+    if model is None:
+        return select_baseline(record, settings=settings, progress=say, noise=noise)
+    return fit_model(record, get_model(model), settings, noise=noise), None
 
 
 def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], rounds, validation,

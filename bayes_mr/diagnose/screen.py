@@ -46,6 +46,7 @@ import numpy as np
 import xarray as xr
 from scipy.stats import qmc
 
+from ..executor import Outcome, run_jobs, share
 from ..likelihood import OutputError
 from ..models import EFFECTS, Effect, Model
 from ..models.model import _BUILT_IN
@@ -356,15 +357,38 @@ def _screen_delay(record: xr.Dataset, base: Fit, effect: Effect, ranges: dict) -
                      ext.result.log_evidence - base.result.log_evidence, ext.mse / base.mse, runs=runs)
 
 
-def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 0, progress=None) -> list[Candidate]:
-    """Every effect of ``effects`` as an extension of ``base``, ranked by score (best first)."""
+def screen_job(record: xr.Dataset, base: Fit, effect: Effect, seed: int) -> Candidate:
+    """:func:`screen_one` as a job for an executor (module level, positional, picklable)."""
+    return screen_one(record, base, effect, seed=seed)
+
+
+def _candidate(effect: Effect, o: Outcome) -> Candidate:
+    """The candidate a screening job gave, or a failed one carrying the job's error."""
+    return o.value if o.ok else Candidate(effect.name, effect, None, -math.inf, error=o.error)
+
+
+def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 0, progress=None,
+           executor=None) -> list[Candidate]:
+    """Every effect of ``effects`` as an extension of ``base``, ranked by score (best first).
+
+    With ``executor`` (:mod:`bayes_mr.executor`) the candidates are fitted as
+    parallel jobs; each candidate's fit depends only on (record, base,
+    effect, seed), and the ranking is of the candidates in the order of
+    ``effects``, so the result is the one of the loop in process.
+    """
     say = progress or (lambda msg: None)
-    out = []
-    for i, effect in enumerate(effects):
-        c = screen_one(record, base, effect, seed=seed)
+    rec, fitted = share(executor, record), share(executor, base)
+    n_done = [0]
+
+    def finished(o: Outcome) -> None:
+        n_done[0] += 1
+        effect = effects[o.index]
+        c = _candidate(effect, o)
         say(f"{base.name} + {effect.name}{'(' + c.channel + ')' if c.channel else ''}: score {c.score:.3g} "
-            f"({i + 1}/{len(effects)})")
-        out.append(c)
+            f"({n_done[0]}/{len(effects)})")
+
+    outcomes = run_jobs(screen_job, [(rec, fitted, e, seed) for e in effects], executor=executor, on_done=finished)
+    out = [_candidate(e, o) for e, o in zip(effects, outcomes)]
     return sorted(out, key=lambda c: -c.score if math.isfinite(c.score) else math.inf)
 
 
@@ -374,12 +398,13 @@ def passes(c: Candidate, threshold: float = THRESHOLD) -> bool:
 
 
 def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,
-                   seed: int = 0, progress=None) -> tuple[list[Candidate], list[list[Candidate]]]:
+                   seed: int = 0, progress=None, executor=None) -> tuple[list[Candidate], list[list[Candidate]]]:
     """Greedy forward selection of effects.
 
     Screen every applicable effect against the current model; add the best if
     it passes; re-screen the rest against the extended model; stop when
-    nothing passes (or after ``max_effects``).
+    nothing passes (or after ``max_effects``). ``executor`` fits each round's
+    candidates as parallel jobs (:func:`screen`).
 
     Returns
     -------
@@ -396,7 +421,7 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
         effects = [e for e in applicable(current.model, record) if e.name not in have]
         if not effects:
             break
-        ranked = screen(record, current, effects, seed=seed, progress=progress)
+        ranked = screen(record, current, effects, seed=seed, progress=progress, executor=executor)
         rounds.append(ranked)
         best = ranked[0]
         if not passes(best, threshold):

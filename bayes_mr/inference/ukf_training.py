@@ -70,6 +70,7 @@ import numba
 import numpy as np
 import xarray as xr
 
+from ..executor import cancel, is_done, share
 from ..likelihood import OutputError, channel_noise
 from ..progress import bar as progress_bar
 from . import ukf
@@ -330,9 +331,7 @@ def _run_on_executor(executor, problem, priors, settings, reset, chunks, stop, c
     Chunks not yet started are cancelled; a chunk already running on a
     worker cannot be stopped from here, and its result is dropped.
     """
-    ref = problem
-    if hasattr(executor, "scatter"):  # dask: ship the (large) problem to the workers once
-        ref = executor.scatter(problem, broadcast=True)
+    ref = share(executor, problem)  # dask: ship the (large) problem to the workers once
     pending: list = []
     interrupted = False
     try:
@@ -344,31 +343,19 @@ def _run_on_executor(executor, problem, priors, settings, reset, chunks, stop, c
     except KeyboardInterrupt:  # the chunk being waited for did not deliver
         interrupted = True
     except BaseException:
-        for _, fut in pending:
-            _cancel(fut)
+        cancel(fut for _, fut in pending)
         raise
     # stopped early: keep the chunks that already finished, cancel the rest
     for idx, fut in pending:
-        if _is_done(fut):
+        if is_done(fut):
             try:
                 out = fut.result()
             except Exception:  # a chunk that failed or was cancelled has nothing to keep
                 continue
             collect(idx, out)
         else:
-            _cancel(fut)
+            cancel([fut])
     return interrupted
-
-
-def _is_done(fut) -> bool:
-    done = getattr(fut, "done", None)
-    return bool(done()) if callable(done) else False
-
-
-def _cancel(fut) -> None:
-    cancel = getattr(fut, "cancel", None)
-    if callable(cancel):
-        cancel()
 
 
 def _assemble(problem: Problem, priors: list[Prior], finished, settings: UKFSettings) -> xr.Dataset:
