@@ -377,7 +377,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
-    _job_flags(p, out="write the Markdown report and figures here",
+    _job_flags(p, out="write the Markdown report, figures, baseline.nc and extended.nc here",
                json=("REPORT.json", "write the report here (default: stdout)"))
 
 
