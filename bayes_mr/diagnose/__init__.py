@@ -110,9 +110,8 @@ def diagnose(
         Another record of the same kind: the baseline and the extended model,
         as fitted, predict it (thesis method 2).
     out_dir : path, optional
-        Write ``diagnose.md``, ``diagnose.json``, PNG figures, and the
-        baseline and extended fits as ``baseline.nc`` and ``extended.nc``
-        (InferenceData that ``bayes-mr validate`` scores) here.
+        Write ``diagnose.md``, ``diagnose.json``, figures, ``baseline.nc`` and
+        ``extended.nc`` (InferenceData ``bayes-mr validate`` scores) here.
     seed : int
         Seed of the least-squares candidates and of the effects' starts.
     progress : bool or callable
@@ -135,12 +134,8 @@ def diagnose(
         order they were added), ``selection`` (each forward-selection round),
         ``masked``, ``threshold``, ``residuals`` (before/after summaries),
         ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``;
-        ``unexplained`` (channel → the final model's residual against the
-        noise floor and where it lives, :func:`.unexplained.unexplained`),
-        ``unexplained_ratio`` (its worst fitted channel), ``at_noise_floor``,
-        ``verdict`` ("at the noise floor", "unexplained by the vocabulary" or
-        "explained by EFFECT[+EFFECT]"); with ``out_dir`` also ``results``
-        (paths of ``baseline.nc`` and ``extended.nc``).
+        ``unexplained``, ``unexplained_ratio``, ``at_noise_floor``, ``verdict``
+        (:func:`_unexplained`); with ``out_dir``, ``results`` (the ``.nc`` paths).
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
