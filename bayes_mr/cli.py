@@ -204,7 +204,7 @@ def cmd_diagnose(args) -> int:
     out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
                    progress=progress_say(on_terminal(not args.quiet)))
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
-          f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
+          f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}; {out['verdict']}",
           file=sys.stderr)
     _write_json(out, args.json)
     return 0

@@ -157,7 +157,6 @@ def diagnose(
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed)
     out.update(_unexplained(record, before, after, [c.name for c in selected]))
-    say(f"verdict: {out['verdict']} (residual {_fmt_ratio(out['unexplained_ratio'])} × the noise floor)")
     if out_dir is not None:
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
@@ -167,16 +166,12 @@ def diagnose(
     return out
 
 
-def _fmt_ratio(v: float | None) -> str:
-    return "n/a" if v is None else f"{v:.3g}"
-
-
 def _unexplained(record: xr.Dataset, before, after, effects: list[str]) -> dict:
     """``unexplained`` (channel → what the final model leaves, :mod:`.unexplained`), ``verdict`` and the
     worst fitted channel's ratio against :data:`~.unexplained.FLOOR_RATIO`."""
     unexp = unexplained(record, after, before)
     worst = _num(worst_ratio(unexp))
-    return {"unexplained": unexp, "verdict": verdict(effects, unexp), "unexplained_ratio": worst,
+    return {"unexplained": unexp, "verdict": verdict(effects, unexp), "unexplained_ratio": worst,  # worst channel
             "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO}
 
 
