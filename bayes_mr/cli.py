@@ -218,7 +218,7 @@ def cmd_diagnose(args) -> int:
         out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
                        progress=progress_say(on_terminal(not args.quiet)), executor=ex, noise=args.noise)
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
-          f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}",
+          f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}; {out['verdict']}",
           file=sys.stderr)
     _write_json(out, args.json)
     return 0
@@ -409,7 +409,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
     _executor_flags(p, "the candidate effects' fits")
-    _job_flags(p, out="write the Markdown report and figures here",
+    _job_flags(p, out="write the Markdown report, figures, baseline.nc and extended.nc here",
                json=("REPORT.json", "write the report here (default: stdout)"))
 
 

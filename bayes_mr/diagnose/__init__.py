@@ -33,9 +33,11 @@ import xarray as xr
 from ..inference.lsq import LSQSettings
 from ..models import NONE, Model, get_model
 from ..progress import say as progress_say
-from .fits import Fit, fit_model, predict, record_mse
+from ..scores import score
+from .fits import Fit, fit_model, inference_data, predict
 from .residuals import residual_views, varying_voltage
 from .screen import THRESHOLD, Candidate, forward_select
+from .unexplained import FLOOR_RATIO, unexplained, verdict, worst_ratio
 
 __all__ = ["FORMS", "THRESHOLD", "diagnose", "select_baseline"]
 
@@ -108,7 +110,8 @@ def diagnose(
         Another record of the same kind: the baseline and the extended model,
         as fitted, predict it (thesis method 2).
     out_dir : path, optional
-        Write ``diagnose.md``, ``diagnose.json`` and PNG figures here.
+        Write ``diagnose.md``, ``diagnose.json``, figures, ``baseline.nc`` and
+        ``extended.nc`` (InferenceData ``bayes-mr validate`` scores) here.
     seed : int
         Seed of the least-squares candidates and of the effects' starts.
     progress : bool or callable
@@ -134,7 +137,9 @@ def diagnose(
         validation_mse_ratio} — and ``effects`` (all effects named, in the
         order they were added), ``selection`` (each forward-selection round),
         ``masked``, ``threshold``, ``residuals`` (before/after summaries),
-        ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``.
+        ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``;
+        ``unexplained``, ``unexplained_ratio``, ``at_noise_floor``, ``verdict``
+        (:func:`_unexplained`); with ``out_dir``, ``results`` (the ``.nc`` paths).
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
@@ -150,13 +155,10 @@ def diagnose(
     validation = _validate(base, ext, validate, record) if validate is not None else None
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed)
+    out.update(_unexplained(record, before, after, [c.name for c in selected]))
     if out_dir is not None:
-        from ..report.diagnose import write_report
-
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
-        paths = write_report(out, record, base, ext, before, after, rounds, Path(out_dir))
-        out["figures"] = {k: str(v) for k, v in paths.items() if k != "report"}
-        out["report"] = str(paths["report"])
+        out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
     if out_dir is not None:
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
@@ -171,6 +173,29 @@ def _baseline(record: xr.Dataset, model, settings: LSQSettings, say,
     if model is None:
         return select_baseline(record, settings=settings, progress=say, noise=noise)
     return fit_model(record, get_model(model), settings, noise=noise), None
+
+
+def _unexplained(record: xr.Dataset, before, after, effects: list[str]) -> dict:
+    """``unexplained`` (channel → what the final model leaves, :mod:`.unexplained`), ``verdict`` and the
+    worst fitted channel's ratio against :data:`~.unexplained.FLOOR_RATIO`."""
+    unexp = unexplained(record, after, before)
+    worst = _num(worst_ratio(unexp))
+    return {"unexplained": unexp, "verdict": verdict(effects, unexp), "unexplained_ratio": worst,  # worst channel
+            "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO}
+
+
+def _write(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before, after, rounds, out_dir: Path,
+           seed: int) -> dict:
+    """Report, figures, and ``baseline.nc`` / ``extended.nc`` (InferenceData ``bayes-mr validate`` reads)."""
+    from .. import results
+    from ..report.diagnose import write_report
+
+    paths = write_report(out, record, base, ext, before, after, rounds, out_dir)
+    fits = {}
+    for label, f in (("baseline", base), ("extended", ext)):
+        fits[label] = str(results.save(inference_data(f, seed=seed), out_dir / f"{label}.nc"))
+    return {"figures": {k: str(v) for k, v in paths.items() if k != "report"}, "report": str(paths["report"]),
+            "results": fits}
 
 
 def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], rounds, validation,
@@ -256,7 +281,10 @@ def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> dict:
     mses = {}
     for label, f in (("baseline", base), ("extended", ext)):
         pred = predict(f.model, validate, f.theta_full)
-        mses[label] = record_mse(validate, pred) if pred is not None else math.inf
+        scores = score(validate, pred) if pred is not None else {"mse": math.inf, "force_nrmse": None}
+        mses[label] = scores["mse"]
         out[f"{label}_mse"] = _num(mses[label])
+        # null when the record measures no force (a structure test without a load cell)
+        out[f"{label}_force_nrmse"] = _num(scores["force_nrmse"])
     out["mse_ratio"] = _num(mses["extended"] / mses["baseline"]) if mses["baseline"] > 0 else None
     return out

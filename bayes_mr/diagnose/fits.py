@@ -201,3 +201,17 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
     phi = converge(lik, best["phi"], refined_at=sd, max_nfev=max_nfev)
     res = laplace(lik, phi)
     return _finish(lik, res, lik.record), [{k: v for k, v in r.items() if k != "phi"} for r in runs]
+
+
+def inference_data(fit: Fit, *, seed: int = 0):
+    """``fit`` as the package's InferenceData, the schema ``fit --engine lsq`` writes.
+
+    The Laplace posterior of the optimum (:meth:`LeastSquares.posterior
+    <bayes_mr.inference.estimators.LeastSquares.posterior>`, draws seeded by
+    ``seed``) through the one results builder, so ``bayes-mr validate`` scores
+    it like any fit.
+    """
+    from ..inference.estimators import LeastSquares
+    from ..results import build
+
+    return build(fit.lik, LeastSquares().posterior(fit.lik, fit.result, seed=seed))

@@ -248,9 +248,9 @@ def varying_voltage(record: xr.Dataset) -> bool:
 def measured_channels(record: xr.Dataset) -> tuple[str, ...]:
     """Channels with a measurement to compare: the likelihood's outputs, plus a
     structure test's damper force when recorded."""
-    from ..data.schema import OUTPUTS
+    from ..data.schema import outputs_of
 
-    out = list(OUTPUTS[record.attrs["kind"]])
+    out = list(outputs_of(record))
     if record.attrs["kind"] == "structure" and "force" in record:
         out.append("force")
     return tuple(out)

@@ -24,7 +24,7 @@ import xarray as xr
 
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
-from .lsq import LSQSettings, fit_lsq
+from .lsq import LSQResult, LSQSettings, fit_lsq
 from .ukf import TAUS, UKFSettings
 
 
@@ -46,8 +46,11 @@ class LeastSquares:
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Optimum, Laplace draws (seeded by ``seed``) and Laplace evidence."""
-        lik = likelihood
-        res = fit_lsq(lik, self.settings)
+        return self.posterior(likelihood, fit_lsq(likelihood, self.settings), seed=seed)
+
+    def posterior(self, lik: OutputError, res: LSQResult, *, seed: int = 0) -> Posterior:
+        """The Laplace posterior of a least-squares optimum ``res`` of ``lik`` (draws seeded by ``seed``);
+        also how a fit made elsewhere (diagnose's refits) becomes a result."""
         coords = lik.par.coords
         draws_phi, n_clipped = laplace_draws(res.phi, res.cov_phi, lik.phi_lo, lik.phi_hi, self.n_draws,
                                              np.random.default_rng(seed))
@@ -55,7 +58,7 @@ class LeastSquares:
         if lik.noise == "sampled":
             x = np.hstack([draws_phi, np.tile(np.log(res.sigma), (draws_phi.shape[0], 1))])
         point = coords.to_theta(res.phi)
-        starts = xr.Dataset(
+        starts = None if not res.starts else xr.Dataset(
             {"start_phi": (("start", "param"), np.array([s["phi0"] for s in res.starts])),
              "final_phi": (("start", "param"), np.array([s["phi"] for s in res.starts])),
              "cost": ("start", np.array([s["cost"] for s in res.starts])),
@@ -65,7 +68,8 @@ class LeastSquares:
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
                 "draws_clipped": n_clipped}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
-                         log_evidence=res.log_evidence, info=info, groups={"lsq_starts": starts},
+                         log_evidence=res.log_evidence, info=info,
+                         groups={"lsq_starts": starts} if starts is not None else {},
                          wall_s=res.wall_s)
 
 

@@ -179,6 +179,73 @@ def crosscorr_figure(before: Views, after: Views):
     return fig
 
 
+#: Length of the measured-vs-predicted window [s].
+WINDOW_S = 0.5
+
+
+def window_figure(record: xr.Dataset, base: Fit, ext: Fit, channel: str, centre: int):
+    """A :data:`WINDOW_S` window of one channel measured vs predicted, the residual under it."""
+    fs = float(record.attrs["fs"])
+    half = max(2, int(WINDOW_S * fs / 2))
+    sl = slice(max(0, centre - half), min(record.sizes["time"], centre + half))
+    t = record["time"].values[sl]
+    y = record[channel].values[sl]
+    fig, (top, bottom) = subplots(2, 1, figsize=(9, 5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    top.plot(t, y, color="0.3", lw=1.4, label="measured")
+    fits = ((base, "tab:blue"),) if ext is base else ((base, "tab:blue"), (ext, "tab:red"))
+    for fit, color in fits:
+        top.plot(t, fit.predicted[channel][sl], color=color, lw=0.9, label=f"predicted: {fit.name}")
+        bottom.plot(t, y - fit.predicted[channel][sl], color=color, lw=0.8, label=fit.name)
+    unit = UNITS.get(channel, "")
+    top.set_ylabel(f"{channel} [{unit}]")
+    top.set_title(f"{channel}: the {WINDOW_S:g} s where the final model's residual is largest", fontsize=9)
+    bottom.set_ylabel(f"residual [{unit}]")
+    bottom.set_xlabel("time [s]")
+    bottom.axhline(0, color="k", lw=0.5)
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+def _bars(ax, rows: list[dict], labels: list[str], title: str, threshold: float) -> None:
+    ratios = [r["ratio"] if r["ratio"] is not None else np.nan for r in rows]
+    ax.bar(range(len(rows)), ratios, color="tab:purple", alpha=0.8)
+    ax.axhline(1.0, color="k", lw=0.8, label="noise floor")
+    ax.axhline(threshold, color="k", lw=0.8, ls="--", label=f"{threshold:g} × floor")
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels(labels, rotation=60, fontsize=6)
+    ax.set_title(title, fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+
+
+def unexplained_figure(unexplained: dict, threshold: float):
+    """Residual RMS over the noise floor of each channel by velocity, displacement, command state,
+    frequency band and time (the ``unexplained`` JSON's ``where``)."""
+    chans = list(unexplained)
+    fig, axes = subplots(len(chans), 5, figsize=(16, 3.0 * len(chans)), squeeze=False)
+    for row, c in zip(axes, chans):
+        w = unexplained[c]["where"]
+        _bars(row[0], w["velocity"], [f"{(r['lo'] + r['hi']) / 2:.2g}" for r in w["velocity"]],
+              f"{c}: by velocity [m/s]", threshold)
+        _bars(row[1], w["displacement"], [f"{(r['lo'] + r['hi']) / 2:.2g}" for r in w["displacement"]],
+              f"{c}: by displacement [m]", threshold)
+        states = ("on", "off", "after_switch_on", "after_switch_off")
+        if w["command"]:
+            _bars(row[2], [{"ratio": w["command"][k]} for k in states], list(states), f"{c}: by command state",
+                  threshold)
+        else:
+            row[2].axis("off")
+        _bars(row[3], w["frequency"], [f"{r['lo_hz']:g}–{r['hi_hz']:.4g}" for r in w["frequency"]],
+              f"{c}: by band [Hz]", threshold)
+        _bars(row[4], w["time"], [f"{r['t0']:.3g}" for r in w["time"]], f"{c}: over time [s]", threshold)
+        row[0].set_ylabel("residual RMS / noise floor", fontsize=8)
+        row[0].legend(fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
 def scores_figure(causes: list[dict], threshold: float):
     """Round-one score of every candidate effect with the decision threshold."""
     rows = [c for c in causes if c.get("score") is not None][::-1]
@@ -196,6 +263,48 @@ def scores_figure(causes: list[dict], threshold: float):
     return fig
 
 
+def _span(unit: str, lo: str = "lo", hi: str = "hi"):
+    """Label of a bin: its range and unit."""
+    return lambda r: f"{fmt(r[lo])}…{fmt(r[hi])} {unit}"
+
+
+def _extremes(rows: list[dict], label) -> str:
+    rows = [r for r in rows if r.get("ratio") is not None]
+    hi, lo = max(rows, key=lambda r: r["ratio"]), min(rows, key=lambda r: r["ratio"])
+    return f"{fmt(hi['ratio'])} × the floor at {label(hi)}, {fmt(lo['ratio'])} at {label(lo)}"
+
+
+def unexplained_text(out: dict) -> list[str]:
+    """The report's "What remains unexplained" section: the ratio to the floor, and where it lives."""
+    lines = ["## What remains unexplained", "",
+             f"**Verdict: {out['verdict']}.** Residual RMS over the channel's noise floor (≈ 1 for a model right "
+             f"to the noise; above {fmt(out['floor_ratio_threshold'])} on any fitted channel with no effect named "
+             f"is \"unexplained by the vocabulary\"), for the final model `{out['extended']['model']}`.", "",
+             "| channel | noise floor | residual RMS | ratio | baseline ratio | variance unexplained | "
+             "Ljung–Box p | τ [samples] |", "|---|---|---|---|---|---|---|---|"]
+    for c, u in out["unexplained"].items():
+        tag = "" if u["in_likelihood"] else " (not fitted)"
+        lines.append(f"| {c}{tag} | {fmt(u['noise_floor'])} | {fmt(u['rms'])} | {fmt(u['ratio'])} | "
+                     f"{fmt(u['baseline_ratio'])} | {fmt(100 * u['variance_share'])} % | {fmt(u['ljung_box_p'])} | "
+                     f"{fmt(u['tau_samples'])} |")
+    lines.append("")
+    for c, u in out["unexplained"].items():
+        w = u["where"]
+        bits = [f"by velocity {_extremes(w['velocity'], _span('m/s'))}",
+                f"by displacement {_extremes(w['displacement'], _span('m'))}"]
+        cmd = w["command"]
+        if cmd:
+            bits.append(f"command on {fmt(cmd['on'])}, off {fmt(cmd['off'])}, in the {fmt(cmd['switch_window_s'])} s "
+                        f"after switching on {fmt(cmd['after_switch_on'])} and off {fmt(cmd['after_switch_off'])} "
+                        f"({cmd['switches']} switches)")
+        band = max((b for b in w["frequency"] if b["share"] is not None), key=lambda b: b["share"])
+        bits.append(f"its largest share of variance ({fmt(100 * band['share'])} %) in {fmt(band['lo_hz'])}–{fmt(band['hi_hz'])} Hz, "
+                    f"{fmt(band['ratio'])} × white noise at the floor there")
+        bits.append(f"over time {_extremes(w['time'], _span('s', 't0', 't1'))}")
+        lines.append(f"- **{c}**: " + "; ".join(bits) + ".")
+    return lines + [""]
+
+
 def _markdown(out: dict, figures: dict[str, Path]) -> str:
     rec = out["record"]
     lines = [f"# Diagnosis of `{rec['source']}`", "",
@@ -204,7 +313,7 @@ def _markdown(out: dict, figures: dict[str, Path]) -> str:
     named = out["effects"]
     lines += ["## Verdict", "",
               f"**Cause: `{out['cause']}`**" + (f" (all named: {', '.join(f'`{n}`' for n in named)})"
-                                               if len(named) > 1 else ""), ""]
+                                               if len(named) > 1 else "") + f" — {out['verdict']}", ""]
     g = out["gain"]
     lines += [f"- baseline `{out['baseline']['model']}`: MSE {fmt(out['baseline']['mse'])}, "
               f"ln Z {fmt(out['baseline']['log_evidence'], 8)}",
@@ -213,6 +322,7 @@ def _markdown(out: dict, figures: dict[str, Path]) -> str:
               f"- MSE ratio (extended/baseline) {fmt(g['mse_ratio'])}; Δ ln Z (Laplace, iid) "
               f"{fmt(g['delta_log_evidence'])}; validation MSE ratio {fmt(g['validation_mse_ratio'])}",
               f"- decision threshold on the score: {fmt(out['threshold'])}; wall time {fmt(out.get('wall_s'))} s", ""]
+    lines += unexplained_text(out)
     if out.get("baselines"):
         lines += ["## Baseline chosen by evidence", "", "| model | ln Z (Laplace) | MSE |", "|---|---|---|"]
         for row in out["baselines"]:
@@ -248,11 +358,15 @@ def _markdown(out: dict, figures: dict[str, Path]) -> str:
         v = out["validation"]
         lines += ["", "## Validation (method 2)", "",
                   f"On `{v['source']}`: baseline MSE {fmt(v['baseline_mse'])}, extended MSE {fmt(v['extended_mse'])}, "
-                  f"ratio {fmt(v['mse_ratio'])}."]
+                  f"ratio {fmt(v['mse_ratio'])}; force NRMSE baseline {fmt(v.get('baseline_force_nrmse'))}, "
+                  f"extended {fmt(v.get('extended_force_nrmse'))}."]
     titles = {"hysteresis": "Loops where the baseline fails most, before and after",
               "residuals_time": "Residuals against time", "residuals_binned": "Residuals against the variables",
               "whiteness": "Whiteness of the residuals", "crosscorr": "Cross-correlations",
-              "scores": "Scores of the candidate effects"}
+              "scores": "Scores of the candidate effects",
+              "unexplained": "Where the residual lives (RMS over the noise floor)"}
+    titles.update({k: f"{k.split('_', 1)[1]}: measured vs predicted, residual under it"
+                   for k in figures if k.startswith("window_")})
     lines += ["", "## Figures", ""]
     for key, path in figures.items():
         lines += [f"### {titles.get(key, key)}", "", f"![{key}]({path.name})", ""]
@@ -273,6 +387,12 @@ def write_report(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before: Vie
         "whiteness": _save(whiteness_figure(before, after, record.sizes["time"]), out_dir / "whiteness.png"),
         "crosscorr": _save(crosscorr_figure(before, after), out_dir / "crosscorr.png"),
     }
+    for c, cv in after.channels.items():  # where the final model is worst, for each channel
+        w = max(2, int(WINDOW_S * float(record.attrs["fs"])))
+        centre = int(np.argmax(np.convolve(cv.residual**2, np.ones(w), mode="same")))
+        figures[f"window_{c}"] = _save(window_figure(record, base, ext, c, centre), out_dir / f"window_{c}.png")
+    figures["unexplained"] = _save(unexplained_figure(out["unexplained"], out["floor_ratio_threshold"]),
+                                   out_dir / "unexplained.png")
     if out["causes"]:
         figures["scores"] = _save(scores_figure(out["causes"], out["threshold"]), out_dir / "scores.png")
     report = out_dir / "diagnose.md"
