@@ -26,6 +26,7 @@ from numba import prange
 
 from .._jit import driver, hot
 from ..models.kernel import K_MASS, L_KIND, L_NS, STRUCT, advance, deriv, rate, substeps
+from .unscented_kernel import cholesky, moments, sigma_points
 
 # status codes of a run
 OK = 0
@@ -41,27 +42,6 @@ NAMES = {
 # info slots
 I_STATUS, I_STEP, I_LOGLIK, I_JITTER, I_NSUB, I_CLIP, I_NUPD = range(7)
 INFO_SIZE = 7
-
-
-@hot
-def cholesky(A, Lo, n):
-    """Lower Cholesky factor of A[:n,:n] into Lo; False if not positive definite."""
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= Lo[j, k] * Lo[j, k]
-        if not (s > 0.0) or not math.isfinite(s):
-            return False
-        d = math.sqrt(s)
-        Lo[j, j] = d
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= Lo[i, k] * Lo[j, k]
-            Lo[i, j] = s / d
-        for i in range(j):
-            Lo[i, j] = 0.0
-    return True
 
 
 @hot
@@ -89,123 +69,15 @@ def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
 
 
 @hot
-def _sigma_points(m, P, S, Pj, X, spread, L):
-    """X ← m ± spread·chol(P) columns, with a bounded jitter ladder.
-
-    Returns 0 (no jitter), 1 (jitter was added) or -1 (not positive definite).
-    """
-    jittered = 0
-    ok = cholesky(P, S, L)
-    if not ok:
-        tr = 0.0
-        for q in range(L):
-            tr += abs(P[q, q])
-        eps = 1e-9 * tr / L
-        for attempt in range(5):
-            for q in range(L):
-                for r in range(L):
-                    Pj[q, r] = P[q, r]
-                Pj[q, q] += eps
-            ok = cholesky(Pj, S, L)
-            if ok:
-                jittered = 1
-                break
-            eps *= 10.0
-    if not ok:
-        return -1
-    for q in range(L):
-        X[0, q] = m[q]
-    for i in range(L):
-        for q in range(L):
-            X[1 + i, q] = m[q] + spread * S[q, i]
-            X[1 + L + i, q] = m[q] - spread * S[q, i]
-    return jittered
-
-
-@hot
-def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA, DB):
-    """Unscented mean of the rows of A (and B) and their cross-covariance Pab.
-
-    ``central`` sums about the first (central) point:
-    m = A₀ + δ, P = Σ_{i≥1} W_i ΔA_i ΔB_iᵀ + (β − α²) δ_A δ_Bᵀ;
-    otherwise with the raw weights (thesis, filterpy). When ``same`` only the
-    lower triangle is computed and mirrored, and B, mb, db, DB must be the
-    same arrays as A, ma, da, DA. DA, DB are scratch (nsig, ·): the
-    deviations are formed once, not once per covariance entry.
-    """
-    na = A.shape[1]
-    nb = B.shape[1]
-    if central:
-        # when ``same``, B is A and db, mb, DB alias da, ma, DA: fill them once
-        for q in range(na):
-            da[q] = 0.0
-        for i in range(1, nsig):
-            for q in range(na):
-                v = A[i, q] - A[0, q]
-                DA[i, q] = v
-                da[q] += v
-        for q in range(na):
-            da[q] *= wi
-            ma[q] = A[0, q] + da[q]
-        if not same:
-            for q in range(nb):
-                db[q] = 0.0
-            for i in range(1, nsig):
-                for q in range(nb):
-                    v = B[i, q] - B[0, q]
-                    DB[i, q] = v
-                    db[q] += v
-            for q in range(nb):
-                db[q] *= wi
-                mb[q] = B[0, q] + db[q]
-        for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = 0.0
-                for i in range(1, nsig):
-                    acc += DA[i, q] * DB[i, r]
-                v = wi * acc + ab * da[q] * db[r]
-                Pab[q, r] = v
-                if same:
-                    Pab[r, q] = v
-    else:
-        for q in range(na):
-            acc = w0m * A[0, q]
-            for i in range(1, nsig):
-                acc += wi * A[i, q]
-            ma[q] = acc
-        if not same:
-            for q in range(nb):
-                acc = w0m * B[0, q]
-                for i in range(1, nsig):
-                    acc += wi * B[i, q]
-                mb[q] = acc
-        for i in range(nsig):
-            for q in range(na):
-                DA[i, q] = A[i, q] - ma[q]
-            if not same:
-                for q in range(nb):
-                    DB[i, q] = B[i, q] - mb[q]
-        for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = w0c * DA[0, q] * DB[0, r]
-                for i in range(1, nsig):
-                    acc += wi * DA[i, q] * DB[i, r]
-                Pab[q, r] = acc
-                if same:
-                    Pab[r, q] = acc
-
-
-@hot
-def _ukf_loop(
-    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, reset, m, P, Q, R,
-    w0m, w0c, wi, spread, ab, central,
-    stride, hist_m, hist_sd, states_m, store_states, info,
-    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
-):
+def _ukf_loop(model, record, state, weights, out, buffers):
     """The filter loop proper (no allocation; see :func:`ukf_run`).
+
+    The arguments are tuples in the order :func:`ukf_run` builds them:
+    ``model`` (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+    ``record`` (h, inputs, yobs, valid, reset), ``state`` (m, P, Q, R),
+    ``weights`` (w0m, w0c, wi, spread, ab, central), ``out`` (stride, hist_m,
+    hist_sd, states_m, store_states, info) and ``buffers`` (the scratch
+    arrays :func:`ukf_run` allocates, and P0s).
 
     Per sample: sigma points about (m, P); propagate the model states of each;
     predicted moments + Q; sigma points redrawn about the prediction (so the
@@ -217,6 +89,12 @@ def _ukf_loop(
     covariance), time restarts at 0, and there is no transition (and no
     update) from sample k−1 to k. φ and its covariance carry over.
     """
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
+    h, inputs, yobs, valid, reset = record
+    m, P, Q, R = state
+    w0m, w0c, wi, spread, ab, central = weights
+    stride, hist_m, hist_sd, states_m, store_states, info = out
+    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s = buffers
     N = inputs.shape[0]
     ns = lay[L_NS]
     L = m.shape[0]
@@ -258,7 +136,7 @@ def _ukf_loop(
             continue  # the next record starts from rest: nothing links k to k+1
         t = (k - k_seg) * h
         # --- predict: propagate every sigma point over [t, t+h] ------------
-        jit = _sigma_points(m, P, S, Pj, X, spread, L)
+        jit = sigma_points(m, P, S, Pj, X, spread, L)
         if jit < 0:
             status = CHOL_FAILED
             step = k
@@ -291,13 +169,13 @@ def _ukf_loop(
             status = NON_FINITE
             step = k + 1
             break
-        _moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
+        moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
         for q in range(L):
             for r in range(L):
                 P[q, r] += Q[q, r]
         # --- update with the measurement at k+1 ----------------------------------
         if valid[k + 1]:
-            jit = _sigma_points(m, P, S, Pj, X, spread, L)
+            jit = sigma_points(m, P, S, Pj, X, spread, L)
             if jit < 0:
                 status = CHOL_FAILED
                 step = k + 1
@@ -313,8 +191,8 @@ def _ukf_loop(
                 status = NON_FINITE
                 step = k + 1
                 break
-            _moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
-            _moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
+            moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
+            moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
             for q in range(ny):
                 for r in range(ny):
                     Pyy[q, r] += R[q, r]
@@ -459,11 +337,12 @@ def ukf_run(
     DY = np.zeros((nsig, ny))
     P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
-        lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-        h, inputs, yobs, valid, reset, m, P, Q, R,
-        w0m, w0c, wi, spread, ab, central,
-        stride, hist_m, hist_sd, states_m, store_states, info,
-        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
+        (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+        (h, inputs, yobs, valid, reset),
+        (m, P, Q, R),
+        (w0m, w0c, wi, spread, ab, central),
+        (stride, hist_m, hist_sd, states_m, store_states, info),
+        (S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s),
     )
 
 
