@@ -77,7 +77,7 @@ def _add_noise(P, Q):
             P[q, r] += Q[q, r]
 
 
-@hot
+@hot(inline="always")  # inlined: a call per sample measured ~7 % slower
 def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     """Sigma points about (m, P) propagated over [t, t+h]; (m, P) ← their moments + Q.
 
@@ -126,7 +126,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     return OK, jit, n_sub
 
 
-@hot
+@hot(inline="always")
 def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     """Kalman update of (m, P) with the measurement y and input a1 at time t1.
 
