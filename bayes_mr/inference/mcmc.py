@@ -34,27 +34,24 @@ and it moves along lines through other walkers, which helps on curved ridges.
 emcee 3.1.6's own ``DESnookerMove`` is wrong (see :class:`~bayes_mr.inference.moves.Snooker`) and is
 not used.
 
-Randomness: ``seed`` → :class:`numpy.random.SeedSequence`; one child seeds the
-:class:`numpy.random.Generator` that draws the initial walkers, the other the
-MT19937 ``RandomState`` emcee uses for its moves (emcee keeps a legacy
-RandomState; we set its state, never the global one). The HDF5 backend
-stores that state after every step, so resuming from a checkpoint continues
-the same random stream: an interrupted and resumed run equals the
-uninterrupted one bit for bit.
+Randomness (:mod:`bayes_mr.inference.checkpoint`): ``seed`` seeds the initial
+walkers and the RandomState of emcee's moves, whose state the HDF5 backend
+stores after every step, so resuming from a checkpoint continues the same
+random stream: an interrupted and resumed run equals the uninterrupted one bit for bit.
 """
 
 from __future__ import annotations
 
-import json
 import time as _time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import emcee
 import numpy as np
 
 from ..progress import bar as progress_bar
+from .checkpoint import open_backend, run_seeds
 from .convergence import convergence_check
 from .moves import MOVES
 
@@ -203,17 +200,7 @@ class MCMCResult:
         return sd / np.sqrt(self.ess)
 
 
-# --- diagnostics -----------------------------------------------------------------
-
 # --- sampling --------------------------------------------------------------------
-
-def _seeds(seed) -> tuple[np.random.SeedSequence, np.random.Generator, dict]:
-    """SeedSequence, the Generator of the initial walkers, and emcee's RandomState state."""
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    init_seq, move_seq = seq.spawn(2)
-    rs = np.random.RandomState(np.random.MT19937(move_seq))
-    return seq, np.random.default_rng(init_seq), rs.get_state()
-
 
 #: Each redraw of the walkers that fell outside the support narrows their cloud by this factor.
 SHRINK = 0.8
@@ -315,45 +302,53 @@ def sample(
     d = x0_center.size
     names = tuple(names) if names is not None else tuple(f"x{j}" for j in range(d))
     n_walkers = settings.walkers(d) if initial is None else int(np.shape(initial)[0])
-    seq, init_rng, move_state = _seeds(settings.seed)
-    # a spawned child shares its parent's entropy: the spawn key tells them apart
-    entropy = str(seq.entropy) + ("/" + "-".join(map(str, seq.spawn_key)) if seq.spawn_key else "")
-
-    backend = None
-    resuming = False
-    if settings.backend is not None:
-        backend = emcee.backends.HDFBackend(str(settings.backend), name=group)
-        if settings.resume and backend.initialized and backend.iteration > 0:
-            with backend.open() as f:
-                stored = f[group].attrs.get("bayes_mr_seed_entropy")
-            if stored is not None and str(stored) != entropy:
-                raise ValueError(f"{settings.backend}[{group}]: checkpoint was made with seed entropy {stored}, "
-                                 f"not {entropy}; resume with the same seed or start afresh (resume=False)")
-            if backend.shape != (n_walkers, d):
-                raise ValueError(f"{settings.backend}[{group}]: checkpoint holds {backend.shape} (walkers, dim), "
-                                 f"this run needs {(n_walkers, d)}")
-            resuming = True
-        else:
-            Path(settings.backend).parent.mkdir(parents=True, exist_ok=True)
-            backend.reset(n_walkers, d)
-            with backend.open("a") as f:
-                f[group].attrs["bayes_mr_seed_entropy"] = entropy
-                f[group].attrs["bayes_mr_settings"] = json.dumps({**asdict(settings), "seed": entropy}, default=str)
-
+    init_rng, move_state, entropy = run_seeds(settings.seed)
+    backend, resuming = open_backend(settings, group, (n_walkers, d), entropy)
     sampler = emcee.EnsembleSampler(n_walkers, d, log_prob, moves=settings.make_moves(), backend=backend,
                                     vectorize=True)
     if resuming:
         state = sampler.backend.get_last_sample()  # carries the stored random state
     else:
-        if initial is not None:
-            coords = np.asarray(initial, float).copy()
-            lp0 = np.asarray(log_prob(coords), float)
-            if not np.all(np.isfinite(lp0)):
-                raise ValueError(f"{int(np.sum(~np.isfinite(lp0)))} initial walkers have no finite log-density")
-        else:
-            coords, lp0 = initial_walkers(log_prob, x0_center, x0_cov, n_walkers, init_rng)
+        coords, lp0 = _start(log_prob, x0_center, x0_cov, n_walkers, init_rng, initial)
         state = emcee.State(coords, log_prob=lp0, random_state=move_state)
+    diag, history = _run_until_converged(sampler, state, settings, resuming)
+    tau = diag["tau"]
+    return MCMCResult(
+        chain=np.array(sampler.get_chain()),
+        log_prob=np.array(sampler.get_log_prob()),
+        burn=int(diag["burn"]),
+        thin=max(1, int(0.5 * float(np.min(tau)))) if np.all(np.isfinite(tau)) else 1,
+        tau=tau,
+        rhat=diag["rhat"],
+        ess=diag["ess"],
+        acceptance=np.array(sampler.acceptance_fraction),
+        converged=bool(diag["converged"]),
+        wall_s=_time.perf_counter() - t0,
+        seed_entropy=entropy,
+        names=names,
+        history=history,
+    )
 
+
+def _start(log_prob, x0_center, x0_cov, n_walkers, rng, initial) -> tuple[np.ndarray, np.ndarray]:
+    """Initial walker positions and their log-densities: ``initial`` checked, or drawn around the centre."""
+    if initial is None:
+        return initial_walkers(log_prob, x0_center, x0_cov, n_walkers, rng)
+    coords = np.asarray(initial, float).copy()
+    lp0 = np.asarray(log_prob(coords), float)
+    if not np.all(np.isfinite(lp0)):
+        raise ValueError(f"{int(np.sum(~np.isfinite(lp0)))} initial walkers have no finite log-density")
+    return coords, lp0
+
+
+def _run_until_converged(sampler, state, settings: MCMCSettings, resuming: bool) -> tuple[dict, list[dict]]:
+    """Advance the sampler in blocks of ``check_every`` steps until the stopping rule or ``max_steps``.
+
+    Checks fall at multiples of ``check_every`` counted from the chain's
+    start (stored steps included), so a resumed run takes the decisions of an
+    uninterrupted one. Returns the last :func:`convergence_check` and the
+    history of checks (step, burn, tau_max, rhat_max).
+    """
     it = int(sampler.iteration)
     history: list[dict] = []
     diag = None
@@ -363,7 +358,7 @@ def sample(
             if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps):
                 diag = convergence_check(sampler.get_chain(), settings)
                 history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
-                                    "rhat_max": float(diag["rhat"].max())})
+                                "rhat_max": float(diag["rhat"].max())})
                 bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
                                 N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
                                 rhat=f"{diag['rhat'].max():.3f}")
@@ -379,25 +374,7 @@ def sample(
             resuming = False
     finally:
         bar.close()
-
-    chain = sampler.get_chain()
-    lp = sampler.get_log_prob()
-    tau = diag["tau"]
-    return MCMCResult(
-        chain=np.array(chain),
-        log_prob=np.array(lp),
-        burn=int(diag["burn"]),
-        thin=max(1, int(0.5 * float(np.min(tau)))) if np.all(np.isfinite(tau)) else 1,
-        tau=tau,
-        rhat=diag["rhat"],
-        ess=diag["ess"],
-        acceptance=np.array(sampler.acceptance_fraction),
-        converged=bool(diag["converged"]),
-        wall_s=_time.perf_counter() - t0,
-        seed_entropy=entropy,
-        names=names,
-        history=history,
-    )
+    return diag, history
 
 
 # --- the package's posterior ----------------------------------------------------------
@@ -471,5 +448,3 @@ def fit_mcmc(lik, *, lsq=None, settings: MCMCSettings = MCMCSettings(), lsq_sett
     center, cov = start_from_lsq(lik, lsq)
     return sample(lik, center, cov, settings, names=lik.names)
 
-
-# --- results ----------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from numba import prange
 
 from .._jit import driver, hot
 from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, advance, channel, deriv, rate, substeps
+from .unscented_kernel import cholesky, moments, sigma_points
 
 # status codes of a run
 OK = 0
@@ -41,27 +42,6 @@ NAMES = {
 # info slots
 I_STATUS, I_STEP, I_LOGLIK, I_JITTER, I_NSUB, I_CLIP, I_NUPD = range(7)
 INFO_SIZE = 7
-
-
-@hot
-def cholesky(A, Lo, n):
-    """Lower Cholesky factor of A[:n,:n] into Lo; False if not positive definite."""
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= Lo[j, k] * Lo[j, k]
-        if not (s > 0.0) or not math.isfinite(s):
-            return False
-        d = math.sqrt(s)
-        Lo[j, j] = d
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= Lo[i, k] * Lo[j, k]
-            Lo[i, j] = s / d
-        for i in range(j):
-            Lo[i, j] = 0.0
-    return True
 
 
 @hot
@@ -85,124 +65,151 @@ def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
         th[free_idx[j]] = (math.exp(v) if is_log[j] else v) / scale[j]
 
 
-@hot
-def _sigma_points(m, P, S, Pj, X, spread, L):
-    """X ← m ± spread·chol(P) columns, with a bounded jitter ladder.
+@hot(inline="always")
+def _add_noise(P, Q):
+    """P += Q (the additive process or measurement noise of one step)."""
+    n = P.shape[0]
+    for q in range(n):
+        for r in range(n):
+            P[q, r] += Q[q, r]
 
-    Returns 0 (no jitter), 1 (jitter was added) or -1 (not positive definite).
+
+@hot(inline="always")  # inlined: a call per sample measured ~7 % slower
+def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
+    """Sigma points about (m, P) propagated over [t, t+h]; (m, P) ← their moments + Q.
+
+    ``a0``, ``a1`` are the inputs at t and t + h; ``sig`` and ``pbuf`` the
+    scratch arrays of :func:`ukf_run`.
+
+    Returns (code, jitter, n_sub): code OK, CHOL_FAILED (P not positive
+    definite after jitter; nothing else done) or NON_FINITE (a propagated
+    state is not finite); jitter 1 if P needed it; the RK4 sub-steps used.
     """
-    jittered = 0
-    ok = cholesky(P, S, L)
-    if not ok:
-        tr = 0.0
-        for q in range(L):
-            tr += abs(P[q, q])
-        eps = 1e-9 * tr / L
-        for attempt in range(5):
-            for q in range(L):
-                for r in range(L):
-                    Pj[q, r] = P[q, r]
-                Pj[q, q] += eps
-            ok = cholesky(Pj, S, L)
-            if ok:
-                jittered = 1
-                break
-            eps *= 10.0
-    if not ok:
-        return -1
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
+    w0m, w0c, wi, spread, ab, central = weights
+    S, Pj, X, TH, d, DX = sig
+    K1, work, sbuf = pbuf
+    ns = lay[L_NS]
+    L = m.shape[0]
+    nsig = 2 * L + 1
+    jit = sigma_points(m, P, S, Pj, X, spread, L)
+    if jit < 0:
+        return CHOL_FAILED, 0, 0
+    lam = 0.0
+    for i in range(nsig):
+        _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
+        deriv(lay, cst, TH[i], t, a0, X[i, :ns], K1[i])
+        if lay[L_KIND] == DEVICE:
+            vmax = max(abs(a0[1]), abs(a1[1]))
+        else:
+            vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
+        r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax)
+        if r_i > lam:
+            lam = r_i
+    n_sub = substeps(lay, cst, lam, h)
+    finite = True
+    for i in range(nsig):
+        for q in range(ns):
+            sbuf[q] = X[i, q]
+        advance(lay, cst, TH[i], t, h, a0, a1, sbuf, K1[i], n_sub, work)
+        for q in range(ns):
+            X[i, q] = sbuf[q]
+            if not math.isfinite(sbuf[q]):
+                finite = False
+    if not finite:
+        return NON_FINITE, jit, n_sub
+    moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
+    _add_noise(P, Q)
+    return OK, jit, n_sub
+
+
+@hot(inline="always")
+def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
+    """Kalman update of (m, P) with the measurement y and input a1 at time t1.
+
+    Returns (code, jitter, log-likelihood increment): code OK, CHOL_FAILED,
+    NON_FINITE (a predicted measurement is not finite) or INNOVATION_NOT_PD;
+    the increment ln N(y; ŷ⁻, P_yy) is meaningful only when OK.
+    """
+    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
+    w0m, w0c, wi, spread, ab, central = weights
+    S, Pj, X, TH, d, DX = sig
+    Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY = ubuf
+    ns = lay[L_NS]
+    L = m.shape[0]
+    ny = y.shape[0]
+    nsig = 2 * L + 1
+    finite = True
+    jit = sigma_points(m, P, S, Pj, X, spread, L)
+    if jit < 0:
+        return CHOL_FAILED, 0, 0.0
+    for i in range(nsig):
+        _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
+        observe(lay, cst, TH[i], t1, a1, X[i, :ns], dsbuf, Y[i])
+        for q in range(ny):
+            if not math.isfinite(Y[i, q]):
+                finite = False
+    if not finite:
+        return NON_FINITE, jit, 0.0
+    moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
+    moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
+    _add_noise(Pyy, R)
+    if not cholesky(Pyy, Syy, ny):
+        return INNOVATION_NOT_PD, jit, 0.0
+    for q in range(ny):
+        nu[q] = y[q] - yhat[q]
+    # z = Syy⁻¹ ν (forward substitution)
+    logdet = 0.0
+    for q in range(ny):
+        acc = nu[q]
+        for r in range(q):
+            acc -= Syy[q, r] * z[r]
+        z[q] = acc / Syy[q, q]
+        logdet += 2.0 * math.log(Syy[q, q])
+    maha = 0.0
+    for q in range(ny):
+        maha += z[q] * z[q]
+    ll = -0.5 * (ny * math.log(2.0 * math.pi) + logdet + maha)
+    # K = Pxy Pyy⁻¹: solve Syy Syyᵀ Kᵀ = Pxyᵀ row by row
     for q in range(L):
-        X[0, q] = m[q]
-    for i in range(L):
-        for q in range(L):
-            X[1 + i, q] = m[q] + spread * S[q, i]
-            X[1 + L + i, q] = m[q] - spread * S[q, i]
-    return jittered
+        for r in range(ny):
+            acc = Pxy[q, r]
+            for c in range(r):
+                acc -= Syy[r, c] * Kg[q, c]
+            Kg[q, r] = acc / Syy[r, r]
+        for r in range(ny - 1, -1, -1):
+            acc = Kg[q, r]
+            for c in range(r + 1, ny):
+                acc -= Syy[c, r] * Kg[q, c]
+            Kg[q, r] = acc / Syy[r, r]
+    for q in range(L):
+        acc = 0.0
+        for r in range(ny):
+            acc += Kg[q, r] * nu[r]
+        m[q] += acc
+    # P ← P − K Pxyᵀ, symmetrised
+    for q in range(L):
+        for r in range(q + 1):
+            acc = 0.0
+            for c in range(ny):
+                acc += 0.5 * (Kg[q, c] * Pxy[r, c] + Kg[r, c] * Pxy[q, c])
+            v = P[q, r] - acc
+            P[q, r] = v
+            P[r, q] = v
+    return OK, jit, ll
 
 
 @hot
-def _moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA, DB):
-    """Unscented mean of the rows of A (and B) and their cross-covariance Pab.
-
-    ``central`` sums about the first (central) point:
-    m = A₀ + δ, P = Σ_{i≥1} W_i ΔA_i ΔB_iᵀ + (β − α²) δ_A δ_Bᵀ;
-    otherwise with the raw weights (thesis, filterpy). When ``same`` only the
-    lower triangle is computed and mirrored, and B, mb, db, DB must be the
-    same arrays as A, ma, da, DA. DA, DB are scratch (nsig, ·): the
-    deviations are formed once, not once per covariance entry.
-    """
-    na = A.shape[1]
-    nb = B.shape[1]
-    if central:
-        # when ``same``, B is A and db, mb, DB alias da, ma, DA: fill them once
-        for q in range(na):
-            da[q] = 0.0
-        for i in range(1, nsig):
-            for q in range(na):
-                v = A[i, q] - A[0, q]
-                DA[i, q] = v
-                da[q] += v
-        for q in range(na):
-            da[q] *= wi
-            ma[q] = A[0, q] + da[q]
-        if not same:
-            for q in range(nb):
-                db[q] = 0.0
-            for i in range(1, nsig):
-                for q in range(nb):
-                    v = B[i, q] - B[0, q]
-                    DB[i, q] = v
-                    db[q] += v
-            for q in range(nb):
-                db[q] *= wi
-                mb[q] = B[0, q] + db[q]
-        for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = 0.0
-                for i in range(1, nsig):
-                    acc += DA[i, q] * DB[i, r]
-                v = wi * acc + ab * da[q] * db[r]
-                Pab[q, r] = v
-                if same:
-                    Pab[r, q] = v
-    else:
-        for q in range(na):
-            acc = w0m * A[0, q]
-            for i in range(1, nsig):
-                acc += wi * A[i, q]
-            ma[q] = acc
-        if not same:
-            for q in range(nb):
-                acc = w0m * B[0, q]
-                for i in range(1, nsig):
-                    acc += wi * B[i, q]
-                mb[q] = acc
-        for i in range(nsig):
-            for q in range(na):
-                DA[i, q] = A[i, q] - ma[q]
-            if not same:
-                for q in range(nb):
-                    DB[i, q] = B[i, q] - mb[q]
-        for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = w0c * DA[0, q] * DB[0, r]
-                for i in range(1, nsig):
-                    acc += wi * DA[i, q] * DB[i, r]
-                Pab[q, r] = acc
-                if same:
-                    Pab[r, q] = acc
-
-
-@hot
-def _ukf_loop(
-    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, reset, m, P, Q, R,
-    w0m, w0c, wi, spread, ab, central,
-    stride, hist_m, hist_sd, states_m, store_states, info,
-    S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
-):
+def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
     """The filter loop proper (no allocation; see :func:`ukf_run`).
+
+    The arguments are tuples in the order :func:`ukf_run` builds them:
+    ``model`` (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+    ``record`` (h, inputs, yobs, valid, reset), ``state`` (m, P, Q, R),
+    ``weights`` (w0m, w0c, wi, spread, ab, central), ``out`` (stride, hist_m,
+    hist_sd, states_m, store_states, info); ``sig``, ``pbuf``, ``ubuf`` are
+    the scratch arrays :func:`ukf_run` allocates for the sigma points, the
+    prediction and the update, and P0s the states' prior covariance.
 
     Per sample: sigma points about (m, P); propagate the model states of each;
     predicted moments + Q; sigma points redrawn about the prediction (so the
@@ -214,12 +221,14 @@ def _ukf_loop(
     covariance), time restarts at 0, and there is no transition (and no
     update) from sample k−1 to k. φ and its covariance carry over.
     """
+    lay, phi_lo, phi_hi = model[0], model[6], model[7]
+    h, inputs, yobs, valid, reset = record
+    m, P, Q, R = state
+    stride, hist_m, hist_sd, states_m, store_states, info = out
     N = inputs.shape[0]
     ns = lay[L_NS]
     L = m.shape[0]
     npf = L - ns
-    ny = yobs.shape[1]
-    nsig = 2 * L + 1
     loglik = 0.0
     n_jitter = 0
     n_clip = 0
@@ -227,7 +236,6 @@ def _ukf_loop(
     max_nsub = 0
     status = OK
     step = -1
-    log2pi = math.log(2.0 * math.pi)
     i_hist = 0
     k_seg = 0  # first sample of the current record (time restarts there)
     for k in range(N):
@@ -254,112 +262,24 @@ def _ukf_loop(
         if reset[k + 1]:
             continue  # the next record starts from rest: nothing links k to k+1
         t = (k - k_seg) * h
-        # --- predict: propagate every sigma point over [t, t+h] ------------
-        jit = _sigma_points(m, P, S, Pj, X, spread, L)
-        if jit < 0:
-            status = CHOL_FAILED
-            step = k
-            break
+        code, jit, n_sub = _predict(model, weights, sig, pbuf, m, P, Q, h, inputs[k], inputs[k + 1], t)
         n_jitter += jit
-        lam = 0.0
-        for i in range(nsig):
-            _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
-            deriv(lay, cst, TH[i], t, inputs[k], X[i, :ns], K1[i])
-            if lay[L_KIND] == DEVICE:
-                vmax = max(abs(inputs[k, 1]), abs(inputs[k + 1, 1]))
-            else:
-                vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
-            r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax)
-            if r_i > lam:
-                lam = r_i
-        n_sub = substeps(lay, cst, lam, h)
         if n_sub > max_nsub:
             max_nsub = n_sub
-        finite = True
-        for i in range(nsig):
-            for q in range(ns):
-                sbuf[q] = X[i, q]
-            advance(lay, cst, TH[i], t, h, inputs[k], inputs[k + 1], sbuf, K1[i], n_sub, work)
-            for q in range(ns):
-                X[i, q] = sbuf[q]
-                if not math.isfinite(sbuf[q]):
-                    finite = False
-        if not finite:
-            status = NON_FINITE
+        if code == CHOL_FAILED:
+            status = code
+            step = k
+            break
+        if code == OK and valid[k + 1]:
+            code, jit, ll = _update(model, weights, sig, ubuf, m, P, R, yobs[k + 1], inputs[k + 1], t + h)
+            n_jitter += jit
+            if code == OK:
+                loglik += ll
+                n_upd += 1
+        if code != OK:
+            status = code
             step = k + 1
             break
-        _moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
-        for q in range(L):
-            for r in range(L):
-                P[q, r] += Q[q, r]
-        # --- update with the measurement at k+1 ----------------------------------
-        if valid[k + 1]:
-            jit = _sigma_points(m, P, S, Pj, X, spread, L)
-            if jit < 0:
-                status = CHOL_FAILED
-                step = k + 1
-                break
-            n_jitter += jit
-            for i in range(nsig):
-                _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
-                observe(lay, cst, TH[i], t + h, inputs[k + 1], X[i, :ns], dsbuf, Y[i])
-                for q in range(ny):
-                    if not math.isfinite(Y[i, q]):
-                        finite = False
-            if not finite:
-                status = NON_FINITE
-                step = k + 1
-                break
-            _moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
-            _moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
-            for q in range(ny):
-                for r in range(ny):
-                    Pyy[q, r] += R[q, r]
-            if not cholesky(Pyy, Syy, ny):
-                status = INNOVATION_NOT_PD
-                step = k + 1
-                break
-            for q in range(ny):
-                nu[q] = yobs[k + 1, q] - yhat[q]
-            # z = Syy⁻¹ ν (forward substitution)
-            logdet = 0.0
-            for q in range(ny):
-                acc = nu[q]
-                for r in range(q):
-                    acc -= Syy[q, r] * z[r]
-                z[q] = acc / Syy[q, q]
-                logdet += 2.0 * math.log(Syy[q, q])
-            maha = 0.0
-            for q in range(ny):
-                maha += z[q] * z[q]
-            loglik += -0.5 * (ny * log2pi + logdet + maha)
-            n_upd += 1
-            # K = Pxy Pyy⁻¹: solve Syy Syyᵀ Kᵀ = Pxyᵀ row by row
-            for q in range(L):
-                for r in range(ny):
-                    acc = Pxy[q, r]
-                    for c in range(r):
-                        acc -= Syy[r, c] * Kg[q, c]
-                    Kg[q, r] = acc / Syy[r, r]
-                for r in range(ny - 1, -1, -1):
-                    acc = Kg[q, r]
-                    for c in range(r + 1, ny):
-                        acc -= Syy[c, r] * Kg[q, c]
-                    Kg[q, r] = acc / Syy[r, r]
-            for q in range(L):
-                acc = 0.0
-                for r in range(ny):
-                    acc += Kg[q, r] * nu[r]
-                m[q] += acc
-            # P ← P − K Pxyᵀ, symmetrised
-            for q in range(L):
-                for r in range(q + 1):
-                    acc = 0.0
-                    for c in range(ny):
-                        acc += 0.5 * (Kg[q, c] * Pxy[r, c] + Kg[r, c] * Pxy[q, c])
-                    v = P[q, r] - acc
-                    P[q, r] = v
-                    P[r, q] = v
         # keep the mean of φ inside its box
         for j in range(npf):
             q = ns + j
@@ -456,11 +376,15 @@ def ukf_run(
     DY = np.zeros((nsig, ny))
     P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
-        lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-        h, inputs, yobs, valid, reset, m, P, Q, R,
-        w0m, w0c, wi, spread, ab, central,
-        stride, hist_m, hist_sd, states_m, store_states, info,
-        S, Pj, X, TH, K1, Y, work, sbuf, dsbuf, d, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DX, DY, P0s,
+        (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+        (h, inputs, yobs, valid, reset),
+        (m, P, Q, R),
+        (w0m, w0c, wi, spread, ab, central),
+        (stride, hist_m, hist_sd, states_m, store_states, info),
+        (S, Pj, X, TH, d, DX),
+        (K1, work, sbuf),
+        (Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY),
+        P0s,
     )
 
 

@@ -10,14 +10,13 @@ from bayes_mr.inference import ukf
 from bayes_mr.inference import ukf_kernel as K
 from bayes_mr.inference.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.evidence import (
-    BoxTarget,
     Evidence,
     laplace_evidence,
-    run_ladder,
     select_route,
     stepping_stone,
     thermodynamic_integration,
 )
+from bayes_mr.inference.ladder import BoxTarget, run_ladder
 from bayes_mr.inference.lsq import fit_lsq
 from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, sample
 from bayes_mr.likelihood import OutputError
@@ -73,7 +72,7 @@ def test_a_checkpointed_ladder_resumes_to_the_same_evidence(gaussian_case, tmp_p
     """Every temperature is a group of one HDF5 file; rerunning with resume=True redoes nothing."""
     from dataclasses import replace as _replace
 
-    from bayes_mr.inference.evidence import LADDER_SETTINGS
+    from bayes_mr.inference.ladder import LADDER_SETTINGS
 
     target, post, _ = gaussian_case
     settings = _replace(LADDER_SETTINGS, backend=tmp_path / "ladder.h5")
