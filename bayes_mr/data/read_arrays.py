@@ -61,15 +61,9 @@ def read_arrays(
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict, None]:
     """Channels of a ``.mat`` / ``.h5`` record in SI (same return as :func:`~bayes_mr.data.read_csv.read_csv`).
 
-    Parameters
-    ----------
-    path : pathlib.Path
-    src : str
-        File name for messages.
-    overrides : dict
-        Channel → unit (:func:`bayes_mr.data.units.parse_unit_options`).
-    columns : dict
-        Channel → variable name in the file (:func:`parse_columns`).
+    ``path`` is read, ``src`` names it in messages; ``overrides`` maps a
+    channel to its unit (:func:`bayes_mr.data.units.parse_unit_options`) and
+    ``columns`` a channel to its variable in the file (:func:`parse_columns`).
 
     Returns
     -------
