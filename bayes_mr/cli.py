@@ -200,11 +200,14 @@ def cmd_compare(args) -> int:
     with _executor(args) as ex:
         out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
                       progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,
-                      executor=ex, noise=args.noise)
+                      executor=ex, noise=args.noise, force=args.force)
     out.pop("idata")
     print(markdown_table(table(out)), file=sys.stderr)
     if out["selected"]:
-        print(f"selected by {out['evidence_route']} evidence: {out['selected']}", file=sys.stderr)
+        print(f"selected by {out['selected_by']}: {out['selected']}" + (" (forced)" if out.get("forced") else ""),
+              file=sys.stderr)
+    elif out.get("refused"):
+        print(f"no model selected: {out['refused']}", file=sys.stderr)
     _write_json(out, args.json)
     return 0
 

@@ -111,13 +111,17 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p = sub.add_parser("compare", help="fit several models with several engines and compare them",
                        description="Models × engines on one record: parameters with uncertainty, MSE, force "
                                    "errors, log evidence and Bayes factors; the model is selected by evidence "
-                                   "(TI with mcmc, else Laplace with lsq, else the UKF's), MSE beside it.")
+                                   "(TI with mcmc, else Laplace with lsq; the UKF's innovation likelihood is "
+                                   "not an evidence: UKF-only comparisons select the lowest MSE).")
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--models", required=True, help=f"comma-separated FORM[+EFFECT...]; forms: {forms}")
     p.add_argument("--engines", default="lsq,mcmc,ukf", help="comma-separated subset of ukf,mcmc,lsq")
     p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
     p.add_argument("--ukf-lhs", type=int, metavar="N",
                    help="Latin-hypercube priors per index of dispersion for the UKF (default 10: 100 priors)")
+    p.add_argument("--force", action="store_true",
+                   help="select even if the evidence's chains (a TI rung, the posterior) did not converge; "
+                        "the JSON then says forced (default: refuse and name the failed rungs)")
     _executor_flags(p, "the models × engines fits")
     _job_flags(p, out="also write every fit as netCDF and the table as CSV here",
                json=("OUT.json", "write the comparison here (default: stdout)"))

@@ -40,7 +40,10 @@ from .models import get_model
 from .progress import say as progress_say
 
 #: Route of each engine's ``log_evidence``, in order of preference for selection.
-ROUTES = (("mcmc", "ti"), ("lsq", "laplace"), ("ukf", "ukf_innovations"))
+#: Evidence routes a comparison selects by, in order of preference. The UKF's innovation likelihood is
+#: not among them: it is the best of 100 runs chosen after seeing the data, with a parameter random walk,
+#: not a marginal likelihood; UKF-only comparisons fall back to the thesis's lowest MSE (3.6.3).
+ROUTES = (("mcmc", "ti"), ("lsq", "laplace"))
 
 
 def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
@@ -119,6 +122,7 @@ def compare(
     estimators: dict | None = None,
     executor=None,
     noise: str = "iid",
+    force: bool = False,
 ) -> dict:
     """Fit every model with every engine and compare.
 
@@ -145,6 +149,10 @@ def compare(
         the result is the same as in process.
     noise : {"iid", "ar"}
         Residual model of every fit (``Identify.noise``).
+    force : bool
+        Select even when the evidence route's chains did not all converge
+        (the JSON then says ``forced``); by default such a comparison is
+        ``refused`` and names the model and rungs that failed.
 
     Returns
     -------
@@ -169,20 +177,46 @@ def compare(
                            progress=bool(progress) and executor is None, out_dir=out_dir, noise=noise)
 
     eng, route = selection_route(rows, models)
-    selected, factors = None, {}
-    if eng is not None:
-        ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == eng}
-        selected = max(ln_z, key=ln_z.get)
-        factors = {m: ln_z[selected] - z for m, z in ln_z.items()}
+    selected, factors, verdict = _select(rows, eng, route, force)
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
     out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
-           "evidence_engine": eng, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
+           "evidence_engine": eng, **verdict, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
            "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     out["idata"] = fits
     return out
+
+
+def _select(rows: list[dict], eng: str | None, route: str | None, force: bool) -> tuple[str | None, dict, dict]:
+    """(selected model, ln Bayes factors, verdict keys) by the route's evidence, or by MSE without one.
+
+    An evidence whose chains did not all converge (a TI/SS ladder rung, or the
+    posterior itself) is not selected on: the comparison says which model and
+    which rungs failed and selects nothing, unless ``force`` (then it selects
+    and says ``forced``).
+    """
+    if eng is None:  # no evidence every model has: the thesis's criterion, the lowest MSE of any engine
+        mse = {r["model"]: float(r["mse"]) for r in rows if _finite(r.get("mse"))}
+        best = min(mse, key=mse.get) if mse else None
+        return best, {}, {"selected_by": "mse" if best else None}
+    ours = [r for r in rows if r["engine"] == eng]
+    failed = {r["model"]: (r.get("evidence_routes") or {}).get(route, {}).get("unconverged_betas")
+              for r in ours if not (r.get("evidence_routes") or {}).get(route, {}).get("converged", True)}
+    ln_z = {r["model"]: float(r["log_evidence"]) for r in ours}
+    best = max(ln_z, key=ln_z.get)
+    factors = {m: ln_z[best] - z for m, z in ln_z.items()}
+    verdict = {"selected_by": f"{route} evidence"}
+    if failed:
+        detail = "; ".join(f"{m}: rungs β = {', '.join(f'{b:.3g}' for b in bs)}" for m, bs in failed.items())
+        verdict["unconverged"] = {m: bs for m, bs in failed.items()}
+        if not force:
+            return None, factors, {**verdict, "selected_by": None,
+                                   "refused": f"{route} evidence did not converge ({detail}); rerun with longer "
+                                              "chains or pass --force to select anyway"}
+        verdict["forced"] = True
+    return best, factors, verdict
 
 
 def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: int, estimators: dict, *,

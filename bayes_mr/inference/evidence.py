@@ -92,6 +92,9 @@ class Evidence:
         Wall time of the route [s] (for TI/SS: the ladder, excluding the β = 1 posterior run).
     details : dict
         Route-specific numbers (ladder, per-temperature means, …).
+    unconverged : list of float
+        β of the ladder rungs whose chains did not converge (TI, SS); empty
+        when every rung did (and for Laplace).
     """
 
     route: str
@@ -101,12 +104,19 @@ class Evidence:
     total_error: float
     wall_s: float = 0.0
     details: dict = field(default_factory=dict)
+    unconverged: list = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        """Every chain behind the estimate converged."""
+        return not self.unconverged
 
     def to_dict(self) -> dict:
         """Plain-Python summary (no per-temperature arrays)."""
         return {"route": self.route, "log_z": float(self.log_z), "mc_error": float(self.mc_error),
                 "ladder_error": float(self.ladder_error), "total_error": float(self.total_error),
-                "wall_s": float(self.wall_s)}
+                "wall_s": float(self.wall_s), "converged": self.converged,
+                "unconverged_betas": [float(b) for b in self.unconverged]}
 
 
 def select_route(routes: dict[str, Evidence]) -> Evidence:
@@ -146,7 +156,7 @@ def thermodynamic_integration(ladder: Ladder) -> Evidence:
     return Evidence("ti", log_z, mc, ladder_err, math.hypot(mc, ladder_err), ladder.wall_s, details={
         "path": ladder.path, "betas": b.tolist(), "mean_g": mean.tolist(), "var_g": var.tolist(),
         "tau_g": ladder.tau.tolist(), "trapezoid": trap + ladder.extra_log_z, "correction": correction,
-        "n_temps": int(b.size - 1)})
+        "n_temps": int(b.size - 1)}, unconverged=ladder.unconverged())
 
 
 def stepping_stone(ladder: Ladder) -> Evidence:
@@ -166,7 +176,7 @@ def stepping_stone(ladder: Ladder) -> Evidence:
         stones.append(ln_r)
     mc = math.sqrt(var_total)
     return Evidence("ss", total, mc, 0.0, mc, ladder.wall_s, details={
-        "path": ladder.path, "betas": b.tolist(), "ln_ratio": stones})
+        "path": ladder.path, "betas": b.tolist(), "ln_ratio": stones}, unconverged=ladder.unconverged())
 
 
 # --- the package's routes ----------------------------------------------------------------

@@ -191,6 +191,16 @@ class Ladder:
     chains: list = field(default_factory=list)
     wall_s: float = 0.0
 
+    def unconverged(self) -> list[float]:
+        """The β of every rung whose chain did not converge (β = 1 is the posterior's own chain).
+
+        A rung that stopped at ``max_steps`` before its ≥ N τ and R-hat rule
+        held gives a biased mean of g there, so an evidence from this ladder
+        is not to be selected on (see :func:`bayes_mr.compare.selection_route`).
+        """
+        return [float(b) for b, c in zip(self.betas, self.chains)
+                if c is not None and not bool(getattr(c, "converged", True))]
+
     def moments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Mean, variance and Monte Carlo variance of the mean of g at each β."""
         mean = np.array([float(np.mean(g)) for g in self.g])

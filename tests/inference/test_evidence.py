@@ -260,3 +260,28 @@ def test_ukf_and_mcmc_means_agree_on_the_25_s_record(numerical_study):
                      coords=problem.coords)
     assert np.all(np.abs(ds["z_phi"].values) < 3.0), ds["z_phi"].values
     assert np.all(np.abs(ds["z_theta"].values) < 3.0), ds["z_theta"].values
+
+
+def test_a_ladder_rung_that_did_not_converge_is_named_and_its_evidence_refused(gaussian_case):
+    """Rungs stopped far short of their ≥ N τ rule: TI and SS carry their β, and compare will not select on them."""
+    from dataclasses import replace as _replace
+
+    from bayes_mr.compare import _select
+    from bayes_mr.inference.ladder import LADDER_SETTINGS
+
+    target, post, *_ = gaussian_case
+    short = _replace(LADDER_SETTINGS, max_steps=60, check_every=30, min_tau_multiple=50.0)
+    betas = np.array([0.0, 0.1, 0.5, 1.0])
+    ladder = run_ladder(target, post, betas=betas, seed=3, settings=short)
+    ti, ss = thermodynamic_integration(ladder), stepping_stone(ladder)
+    assert set(ti.unconverged) <= {0.1, 0.5} and ti.unconverged and not ti.converged
+    assert ss.unconverged == ti.unconverged and ti.to_dict()["converged"] is False
+    rows = [{"model": "a", "engine": "mcmc", "log_evidence": ti.log_z, "evidence_route": "ti",
+             "evidence_routes": {"ti": ti.to_dict()}},
+            {"model": "b", "engine": "mcmc", "log_evidence": ti.log_z - 5.0, "evidence_route": "ti",
+             "evidence_routes": {"ti": {**ti.to_dict(), "converged": True, "unconverged_betas": []}}}]
+    selected, factors, verdict = _select(rows, "mcmc", "ti", force=False)
+    assert selected is None and "refused" in verdict and "a: rungs β = " in verdict["refused"]
+    assert factors["b"] == pytest.approx(5.0)
+    selected, _, verdict = _select(rows, "mcmc", "ti", force=True)
+    assert selected == "a" and verdict["forced"] is True and list(verdict["unconverged"]) == ["a"]
