@@ -15,7 +15,11 @@ at σ ≥ 1/2, where |z| ≤ 1 is invariant (Ikhrouane & Rodellar 2005); below i
 an unloading branch can push z outward and the filter diverges.
 
 Signs: every parameter is positive (log scale) except the classic
-``bouc-wen``'s ``gamma``. In the classic law ṙ = ẋ − β₁|ẋ||r|^{n−1}r −
+``bouc-wen``'s ``gamma``, which is *sign-free*: estimated on a log scale over
+its default positive range (the thesis's softening loops, Table 3.2, where the
+UKF needs the log coordinate), and carried linearly when the prior range given
+reaches zero or below (``--prior gamma=-2000:2000``, a hardening loop). In the
+classic law ṙ = ẋ − β₁|ẋ||r|^{n−1}r −
 γẋ|r|^n the loading branch is ṙ = ẋ(1 − (β₁+γ)|r|^n) and the unloading one
 ṙ = ẋ(1 + (β₁−γ)|r|^n): β₁ > 0 is the dissipation (loop area), while γ of
 either sign is admissible (Wen 1976; Ikhouane & Rodellar 2007 classify the
@@ -74,9 +78,10 @@ BOUC_WEN = Form(
         ParamSpec("c", "N·s/m", "viscous damping", 0.3, F_V, (1e-3, 2.0)),
         ParamSpec("k", "N/m", "stiffness (elastic and hysteretic)", 9.0, F_X, (1e-4, 3.0)),
         ParamSpec("beta1", "1/m^n", "Bouc–Wen β₁ (scale relative to X⁻² assumes n ≈ 2)", 2.0, PER_X2, (1e-4, 100.0)),
-        # signed: γ < 0 hardens the loading branch (the Bouc–Wen benchmark's γ is −1100 /m at n = 1);
-        # carried linearly within ±100 X⁻², the upper end of β₁'s range
-        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ (signed)", 1.0, PER_X2, (0.0, 100.0), positive=False),
+        # sign-free: γ < 0 hardens the loading branch (the Bouc–Wen benchmark's γ is −1100 /m at n = 1);
+        # log scale over the default positive range, linear when a given range includes γ ≤ 0
+        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ (a range reaching γ ≤ 0 allows a hardening loop)", 1.0, PER_X2,
+                  (1e-4, 100.0), sign_free=True),
         ParamSpec("n", "-", "Bouc–Wen exponent", 2.0, ONE, (1.0, 4.0)),
     ),
     ("r",),

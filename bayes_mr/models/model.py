@@ -167,7 +167,7 @@ class Model:
         for spec in self.param_specs(kind):
             if spec.name in values:
                 v = float(values[spec.name])
-                if spec.positive and not v > 0:
+                if spec.positive and not spec.sign_free and not v > 0:
                     raise ValueError(f"parameter '{spec.name}' of {self.name} must be positive, got {v}")
                 out.append(v)
             elif defaults:

@@ -81,6 +81,10 @@ class ParamSpec:
         Plausible range as multiples of the reference magnitude.
     positive : bool
         Positive parameters are estimated on a log scale; others linearly.
+    sign_free : bool
+        A positive parameter whose physics also allows the other sign: on a
+        log scale over a positive range, linear when the range given reaches
+        zero or below (see :meth:`Coordinates.build`).
     """
 
     name: str
@@ -90,6 +94,11 @@ class ParamSpec:
     dims: tuple[int, int, int, int] = (0, 0, 0, 0)
     span: tuple[float, float] = (0.1, 10.0)
     positive: bool = True
+    sign_free: bool = False
+
+    def log_scaled(self, lo: float) -> bool:
+        """Whether the parameter is estimated on a log scale for a range starting at ``lo``."""
+        return self.positive and not (self.sign_free and lo <= 0)
 
     def plausible(self, scales: Scales | None) -> tuple[float, float]:
         """Plausible range [lo, hi] in SI units for a record with ``scales``.
@@ -140,7 +149,7 @@ class Coordinates:
         scale, log, lower, upper = [], [], [], []
         for spec in specs:
             lo, hi = ranges[spec.name]
-            if spec.positive:
+            if spec.log_scaled(lo):
                 if not (0 < lo < hi):
                     raise ValueError(f"parameter '{spec.name}': range must satisfy 0 < lo < hi, got {lo}, {hi}")
                 scale.append(10.0 ** (-math.floor(math.log10(lo))))
@@ -148,7 +157,7 @@ class Coordinates:
                 if not lo < hi:
                     raise ValueError(f"parameter '{spec.name}': range must satisfy lo < hi, got {lo}, {hi}")
                 scale.append(10.0 ** (-math.floor(math.log10(max(abs(lo), abs(hi))))))
-            log.append(spec.positive)
+            log.append(spec.log_scaled(lo))
             lower.append(lo)
             upper.append(hi)
         return cls(

@@ -145,9 +145,6 @@ def test_ukf_recovers_parameters_from_simulated_structure_test(name, values, che
     assert max(rel[n] for n in checked) < 0.05, rel
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 14 item 2: the best-of-100 UKF is biased on Table 3.2; since γ became signed (issue 13) and is "
-    "carried on a linear scale its worst parameter error is 6.2 % (was < 5 % on the log scale)"))
 def test_ukf_recovers_classic_bouc_wen_of_thesis_table_3_2():
     """m = 0.2, c = 0.3, k = 9, β₁ = 2, γ = 1, n = 2; El Centro at 50 Hz, 1 % noise."""
     from bayes_mr.data.ground_motions import load_ground_motion
