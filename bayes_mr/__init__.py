@@ -53,8 +53,8 @@ _PUBLIC = {
     "load_result": ("bayes_mr.results", "load_result"),
     "score": ("bayes_mr.scores", "score"),
     # comparison and diagnosis
-    "compare": ("bayes_mr.compare", "compare"),
-    "diagnose": ("bayes_mr.diagnose", "diagnose"),
+    "compare": ("bayes_mr.comparison", "compare"),
+    "diagnose": ("bayes_mr.diagnosis", "diagnose"),
 }
 
 __all__ = sorted(_PUBLIC)

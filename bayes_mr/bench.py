@@ -247,7 +247,7 @@ def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, o
     carries an offset ``offset`` [N] (F_d = 25 N), band-limited ground noise,
     1 % noise on the outputs; the baseline is ``dahl`` (given, as a user would).
     """
-    from .diagnose import diagnose
+    from .diagnosis import diagnose
     from .signals import make_signal
 
     sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=10.0, seed=seed)

@@ -188,7 +188,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from .compare import compare, table
+    from .comparison import compare, table
     from .identify import UKF
     from .report.markdown import markdown_table
 
@@ -213,7 +213,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
-    from .diagnose import diagnose
+    from .diagnosis import diagnose
 
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None

@@ -41,7 +41,7 @@ import numpy as np
 import xarray as xr
 
 from . import results
-from .compare import compare, selection_route, table
+from .comparison import compare, selection_route, table
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
@@ -167,7 +167,7 @@ def _engines_for(form: str, budget: Budget, kind: str) -> list[str]:
 
 
 def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
-    """Every form × engine on A, validated on B (one :func:`bayes_mr.compare.compare` per form)."""
+    """Every form × engine on A, validated on B (one :func:`bayes_mr.comparison.compare` per form)."""
     kind = part_a.attrs["kind"]
     estimators = {"lsq": LeastSquares(),
                   "mcmc": Emcee(settings=replace(budget.mcmc, seed=seed, progress=False), evidence=budget.evidence),
@@ -281,7 +281,7 @@ def diagnose_models(part_a, part_b, models, budget: Budget, *, seed: int, out_di
     when None); each diagnosis writes its report under
     ``out_dir/diagnose_MODEL``. A failed diagnosis is kept as ``{"error": …}``.
     """
-    from .diagnose import diagnose
+    from .diagnosis import diagnose
 
     window = part_a if budget.diagnose_s is None else part_a.isel(
         time=slice(0, int(budget.diagnose_s * float(part_a.attrs["fs"]))))

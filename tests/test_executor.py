@@ -15,8 +15,8 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 import pytest
 
 from bayes_mr.cli import main
-from bayes_mr.compare import compare
-from bayes_mr.diagnose import diagnose
+from bayes_mr.comparison import compare
+from bayes_mr.diagnosis import diagnose
 from bayes_mr.executor import open_executor, run_jobs
 from bayes_mr.results import _jsonable
 from records import offset_device_record

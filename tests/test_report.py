@@ -17,7 +17,7 @@ def test_importing_and_drawing_leave_matplotlib_alone():
     code = """
 import matplotlib
 matplotlib.use("svg")
-import bayes_mr.cli, bayes_mr.mainjob, bayes_mr.bench, bayes_mr.diagnose
+import bayes_mr.cli, bayes_mr.mainjob, bayes_mr.bench, bayes_mr.diagnosis
 from bayes_mr.report import diagnose, figures, readme, run
 import numpy as np, sys, tempfile, pathlib
 t = np.linspace(0, 1, 50)

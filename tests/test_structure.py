@@ -138,11 +138,11 @@ def test_no_import_cycle():
 
 #: Lower layer (module prefix) → what it must never import (module prefixes).
 FORBIDDEN = {
-    "bayes_mr.data": ("bayes_mr.inference", "bayes_mr.selection", "bayes_mr.diagnose", "bayes_mr.cli",
+    "bayes_mr.data": ("bayes_mr.inference", "bayes_mr.selection", "bayes_mr.diagnosis", "bayes_mr.cli",
                       "bayes_mr.mainjob", "bayes_mr.report"),
-    "bayes_mr.models": ("bayes_mr.inference", "bayes_mr.selection", "bayes_mr.diagnose", "bayes_mr.cli",
+    "bayes_mr.models": ("bayes_mr.inference", "bayes_mr.selection", "bayes_mr.diagnosis", "bayes_mr.cli",
                         "bayes_mr.mainjob", "bayes_mr.report"),
-    "bayes_mr.inference": ("bayes_mr.selection", "bayes_mr.diagnose", "bayes_mr.cli", "bayes_mr.mainjob"),
+    "bayes_mr.inference": ("bayes_mr.selection", "bayes_mr.diagnosis", "bayes_mr.cli", "bayes_mr.mainjob"),
 }
 
 

@@ -196,7 +196,7 @@ class Ladder:
 
         A rung that stopped at ``max_steps`` before its ≥ N τ and R-hat rule
         held gives a biased mean of g there, so an evidence from this ladder
-        is not to be selected on (see :func:`bayes_mr.compare.selection_route`).
+        is not to be selected on (see :func:`bayes_mr.comparison.selection_route`).
         """
         return [float(b) for b, c in zip(self.betas, self.chains)
                 if c is not None and not bool(getattr(c, "converged", True))]

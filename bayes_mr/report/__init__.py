@@ -1,7 +1,7 @@
 """Reporting: Markdown, figures and README sections, one module per concern.
 
-A layer above the library: these modules read what :mod:`bayes_mr.diagnose`,
-:mod:`bayes_mr.compare` and :mod:`bayes_mr.results` computed and never
+A layer above the library: these modules read what :mod:`bayes_mr.diagnosis`,
+:mod:`bayes_mr.comparison` and :mod:`bayes_mr.results` computed and never
 compute a result themselves. Only the top level (the CLI, the main job, the
 benchmark, the studies and ``scripts/``) imports them — and
 ``diagnose(out_dir=...)``, which writes its report through

@@ -1,9 +1,9 @@
-"""Figures and the Markdown report of a diagnosis (:func:`bayes_mr.diagnose.diagnose`).
+"""Figures and the Markdown report of a diagnosis (:func:`bayes_mr.diagnosis.diagnose`).
 
-Everything drawn here was computed before (:mod:`bayes_mr.diagnose.residuals`,
-:mod:`bayes_mr.diagnose.screen`); figures are deterministic for a given
+Everything drawn here was computed before (:mod:`bayes_mr.diagnosis.residuals`,
+:mod:`bayes_mr.diagnosis.screen`); figures are deterministic for a given
 diagnosis and drawn with the object API of :mod:`.figures` (no pyplot, no
-global backend). This module imports nothing of :mod:`bayes_mr.diagnose` at
+global backend). This module imports nothing of :mod:`bayes_mr.diagnosis` at
 run time (the fits and residual views it draws are passed in), so the lazy
 call from ``diagnose(out_dir=...)`` makes no import cycle.
 """
@@ -21,8 +21,8 @@ from .figures import save, subplots
 from .markdown import fmt
 
 if TYPE_CHECKING:  # annotations only
-    from ..diagnose.fits import Fit
-    from ..diagnose.residuals import Views
+    from ..diagnosis.fits import Fit
+    from ..diagnosis.residuals import Views
 
 #: Most points drawn per line (long records are thinned evenly).
 MAX_POINTS = 20000

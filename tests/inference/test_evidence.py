@@ -266,7 +266,7 @@ def test_a_ladder_rung_that_did_not_converge_is_named_and_its_evidence_refused(g
     """Rungs stopped far short of their ≥ N τ rule: TI and SS carry their β, and compare will not select on them."""
     from dataclasses import replace as _replace
 
-    from bayes_mr.compare import _select
+    from bayes_mr.comparison import _select
     from bayes_mr.inference.ladder import LADDER_SETTINGS
 
     target, post, *_ = gaussian_case

@@ -1,6 +1,6 @@
 """Compare models × engines on one record: parameters, errors, evidence, Bayes factors.
 
->>> from bayes_mr.compare import compare
+>>> from bayes_mr.comparison import compare
 >>> out = compare(record, ["dahl", "lugre"], engines=("lsq", "mcmc"))   # doctest: +SKIP
 >>> out["selected"], out["bayes_factors"]                              # doctest: +SKIP
 

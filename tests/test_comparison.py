@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bayes_mr.cli import main
-from bayes_mr.compare import compare, crosscheck, selection_route
+from bayes_mr.comparison import compare, crosscheck, selection_route
 from bayes_mr.identify import UKF, Emcee, Identify
 from bayes_mr.inference.mcmc import MCMCSettings
 from records import offset_device_record

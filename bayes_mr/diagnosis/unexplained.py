@@ -141,7 +141,7 @@ def unexplained(record: xr.Dataset, views: Views, baseline: Views | None = None)
     record : xarray.Dataset
     views : Views
         Residual views of the model whose unexplained part is measured
-        (:func:`~bayes_mr.diagnose.residuals.residual_views`).
+        (:func:`~bayes_mr.diagnosis.residuals.residual_views`).
     baseline : Views, optional
         The baseline's views: its ratio is reported beside (``baseline_ratio``).
 

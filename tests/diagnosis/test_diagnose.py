@@ -15,9 +15,9 @@ import math
 import numpy as np
 import pytest
 
-from bayes_mr.diagnose import THRESHOLD, diagnose
-from bayes_mr.diagnose.inflation import design_effect_of
-from bayes_mr.diagnose.residuals import envelope, lag_of, ljung_box
+from bayes_mr.diagnosis import THRESHOLD, diagnose
+from bayes_mr.diagnosis.inflation import design_effect_of
+from bayes_mr.diagnosis.residuals import envelope, lag_of, ljung_box
 from bayes_mr.stats import integrated_time
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.signals import make_signal
@@ -143,7 +143,7 @@ def test_residual_figures_of_a_clean_record_show_the_baseline():
 
     matplotlib.use("Agg")
     from bayes_mr.report.diagnose import crosscorr_figure, residual_binned_figure, whiteness_figure
-    from bayes_mr.diagnose.residuals import residual_views
+    from bayes_mr.diagnosis.residuals import residual_views
     from bayes_mr.simulate import Inputs, simulate
 
     rec = simulated_record("structure", "dahl", duration=2.0)

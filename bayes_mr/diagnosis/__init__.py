@@ -1,7 +1,7 @@
 """Diagnose a model on measured data: residual → cause → extension → gain.
 
 >>> from bayes_mr.data import load_packaged
->>> from bayes_mr.diagnose import diagnose
+>>> from bayes_mr.diagnosis import diagnose
 >>> report = diagnose(load_packaged(), out_dir="results/diagnose")   # doctest: +SKIP
 >>> report["cause"], report["gain"]["mse_ratio"]                      # doctest: +SKIP
 

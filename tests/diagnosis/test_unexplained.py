@@ -13,10 +13,10 @@ import pytest
 
 from bayes_mr.cli import main
 from bayes_mr.data import load
-from bayes_mr.diagnose import diagnose
-from bayes_mr.diagnose.fits import fit_model
-from bayes_mr.diagnose.residuals import residual_views
-from bayes_mr.diagnose.unexplained import AT_FLOOR, BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
+from bayes_mr.diagnosis import diagnose
+from bayes_mr.diagnosis.fits import fit_model
+from bayes_mr.diagnosis.residuals import residual_views
+from bayes_mr.diagnosis.unexplained import AT_FLOOR, BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 from bayes_mr.models import NONE
 from diagnose.test_diagnose import simulated_record  # tests/ is on the path (pyproject)
 
