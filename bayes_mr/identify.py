@@ -123,7 +123,8 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
     if not (np.isfinite(warmup) and warmup >= 0):
         raise ValueError(f"warmup must be a non-negative number of seconds, got {warmup}")
     t0 = _time.perf_counter()
-    pred = predict(summary.model, record, results.point_of(idata))
+    # parameters held fixed in the fit are not in the point estimate; without them the defaults would be used
+    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)})
     scores = score(_after(record, warmup), pred)
     out = summary.to_dict()
     out.update(

@@ -49,3 +49,12 @@ def test_validate_scores_another_record(fitted):
     rec, _ = structure_record("dahl", {}, n=500)
     with pytest.raises(ValueError, match="device test, the record a structure test"):
         validate(fitted, rec)
+
+
+def test_validate_keeps_the_parameters_the_fit_held_fixed():
+    """A fit with k fixed far from its default predicts another record with that k, not the default."""
+    rec, _ = structure_record("dahl", {}, n=1500, seed=3)
+    idata = Identify("dahl", LeastSquares(), fixed={"k": 2.2e4}).fit(rec, progress=False)
+    summary = results.summary_of(idata)
+    assert summary.extra["fixed"] == {"k": 2.2e4}
+    assert validate(idata, rec)["mse"] == pytest.approx(summary.mse, rel=1e-9)
