@@ -172,3 +172,13 @@ def offset_device_record(duration: float, offset: float = -60.0, seed: int = 3, 
         duration=duration, fs=fs, amplitude=0.01, fmax=5.0, signal_seed=seed, noise=0.01, seed=seed + 1,
         source=f"dahl+force_offset-{seed}",
     )
+
+
+def masked_structure_record() -> xr.Dataset:
+    """A 2 s Dahl structure test at 200 Hz, 2 % noise, with samples 50–79 masked (the likelihood tests' record)."""
+    rec = signal_record("dahl", "structure", duration=2.0, fs=200.0, amplitude=3e-3, fmax=10.0, signal_seed=3,
+                        mass=50.0, noise=0.02, seed=4, source="test: masked")
+    valid = np.ones(rec.sizes["time"], bool)
+    valid[50:80] = False
+    rec["valid"] = ("time", valid)
+    return rec

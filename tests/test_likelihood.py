@@ -5,16 +5,12 @@ import pytest
 from scipy.stats import norm
 
 from bayes_mr.likelihood import OutputError
-from records import signal_record
+from records import masked_structure_record
 
 
 @pytest.fixture(scope="module")
 def masked_record():
-    rec = signal_record("dahl", "structure", duration=2.0, fs=200.0, amplitude=3e-3, fmax=10.0, signal_seed=3,
-                        mass=50.0, noise=0.02, seed=4, source="test: masked")
-    valid = np.ones(rec.sizes["time"], bool)
-    valid[50:80] = False
-    rec["valid"] = ("time", valid)
+    rec = masked_structure_record()
     rec["displacement"].values[60] = np.nan  # a masked sample may hold anything
     return rec
 

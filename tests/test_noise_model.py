@@ -86,11 +86,6 @@ def test_the_iid_likelihood_is_unchanged_and_ar_with_order_zero_equals_it(masked
 
 @pytest.fixture(scope="module")
 def masked_record():
-    from records import signal_record
+    from records import masked_structure_record
 
-    rec = signal_record("dahl", "structure", duration=2.0, fs=200.0, amplitude=3e-3, fmax=10.0, signal_seed=3,
-                        mass=50.0, noise=0.02, seed=4, source="test: masked")
-    valid = np.ones(rec.sizes["time"], bool)
-    valid[50:80] = False
-    rec["valid"] = ("time", valid)
-    return rec
+    return masked_structure_record()
