@@ -21,11 +21,12 @@ from cases import CASES, fit_case  # noqa: E402
 EXPECTED = json.loads((GOLDEN / "fits.json").read_text())
 
 
-def _close(a, b, path=""):
+def assert_close(a, b, path=""):
+    """Assert nested JSON values equal, floats to round-off (1e-9 relative)."""
     if isinstance(a, dict):
         assert set(a) == set(b), f"{path}: keys {sorted(a)} != {sorted(b)}"
         for k in a:
-            _close(a[k], b[k], f"{path}.{k}")
+            assert_close(a[k], b[k], f"{path}.{k}")
     elif isinstance(a, float) and isinstance(b, (int, float)):
         assert math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12), f"{path}: {a!r} != {b!r}"
     else:
@@ -34,4 +35,4 @@ def _close(a, b, path=""):
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_golden_fit(name):
-    _close(fit_case(name), EXPECTED[name], name)
+    assert_close(fit_case(name), EXPECTED[name], name)
