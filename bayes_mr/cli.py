@@ -230,7 +230,7 @@ def cmd_diagnose(args) -> int:
 def cmd_run(args) -> int:
     from .mainjob import run
 
-    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet)
+    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, noise=args.noise)
     print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)
     if args.json:
         _write_json(summary, args.json)

@@ -147,6 +147,9 @@ def _job_parsers(sub) -> None:
     p.add_argument("--quick", action="store_true", help="a minute-long pass on a short window")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--json", metavar="OUT.json", help="also write the summary here")
+    p.add_argument("--noise", choices=("iid", "ar"), default=None,
+                   help="residual model of the comparison (default iid); the other one is refitted by least "
+                        "squares beside it and the report says how the model choice and ln BF move")
     _no_readme_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 

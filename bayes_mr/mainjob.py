@@ -86,6 +86,10 @@ class Budget:
         Latin-hypercube priors per index of dispersion.
     ukf_taus : tuple of float
         Indices of dispersion (thesis: ten).
+    noise : {"iid", "ar"}
+        Residual model of the comparison's likelihood (``Identify.noise``).
+        The other one is also fitted by least squares, so the report says how
+        the model choice and the Bayes factors move between them.
     diagnose_s : float or None
         Diagnose the selected model, and the best of the thesis's forms when
         that is another, on the first this-many seconds of part A (None: all
@@ -104,6 +108,7 @@ class Budget:
     ukf_lhs: int = 3
     ukf_taus: tuple[float, ...] = TAUS
     diagnose_s: float | None = 4.0
+    noise: str = "iid"
 
 
 #: ``make run``: the whole trimmed record at ~250 Hz (the force's content lies below ~50 Hz; the
@@ -179,7 +184,7 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
             skipped[form] = (f"{len(get_model(form).free_names(kind))} free parameters > "
                              f"{budget.mcmc_max_params}: no emcee posterior in this budget")
         out = compare(part_a, [form], engines=engines, validate=part_b, seed=seed, progress=say,
-                      estimators=estimators)
+                      estimators=estimators, noise=budget.noise)
         rows += out["rows"]
         fits.update(out["idata"])
         for (m, e), idata in out["idata"].items():
@@ -191,6 +196,43 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
     factors = {m: ln_z[selected] - z for m, z in ln_z.items()} if selected else {}
     return {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
             "evidence_engine": eng, "mcmc_skipped": skipped, "idata": fits}
+
+
+def _laplace_choice(rows: list[dict]) -> dict:
+    """Selected model and ln Bayes factors from the least-squares (Laplace) rows."""
+    ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == "lsq" and "error" not in r}
+    if not ln_z:
+        return {"selected": None, "log_evidence": {}, "bayes_factors": {}}
+    sel = max(ln_z, key=ln_z.get)
+    return {"selected": sel, "log_evidence": ln_z, "bayes_factors": {m: ln_z[sel] - z for m, z in ln_z.items()}}
+
+
+def noise_sensitivity(part_a, budget: Budget, rows: list[dict], *, seed: int, say) -> dict:
+    """The model choice under the other residual model (least squares, Laplace evidence).
+
+    The comparison's own likelihood treats the residual as ``budget.noise``;
+    here every form is refitted with the other one (``iid`` ↔ ``ar``), so the
+    report can say how the selection and the ln Bayes factors move when the
+    residual's correlation in time is (or is not) modelled (issue 14: an iid
+    likelihood's ln BF grows with the sampling rate, an AR one with the
+    information in the record).
+
+    Returns
+    -------
+    dict
+        ``{noise: {"selected", "log_evidence", "bayes_factors", "n_eff"}}`` for
+        both residual models, each from lsq rows on part A.
+    """
+    other = "ar" if budget.noise == "iid" else "iid"
+    alt_rows = []
+    for form in budget.forms:
+        say(f"{form}: least squares under the {other} residual model")
+        alt_rows += compare(part_a, [form], engines=["lsq"], seed=seed, progress=say, noise=other)["rows"]
+    out = {}
+    for noise, rs in ((budget.noise, rows), (other, alt_rows)):
+        out[noise] = _laplace_choice(rs)
+        out[noise]["n_eff"] = {r["model"]: r.get("n_eff") for r in rs if r["engine"] == "lsq" and "error" not in r}
+    return out
 
 
 #: The forms the thesis identified on its shake table (Spencer's model is a device model with 14 parameters).
@@ -306,7 +348,7 @@ def _strip(d):
 
 
 def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, progress=True,
-        budget: Budget | None = None, record: xr.Dataset | None = None,
+        budget: Budget | None = None, record: xr.Dataset | None = None, noise: str | None = None,
         stages: tuple[str, ...] = ("compare", "spencer", "diagnose", "shake_table")) -> dict:
     """The main job. Returns the summary written to ``out_dir/summary.json``.
 
@@ -324,6 +366,10 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         Overrides ``quick``.
     record : xarray.Dataset, optional
         A device test to use instead of the packaged NEES record.
+    noise : {"iid", "ar"}, optional
+        Residual model of the comparison (default: the budget's, ``iid``);
+        the other one is fitted by least squares beside it
+        (:func:`noise_sensitivity`).
     stages : tuple of str
         Stages after the comparison (which always runs): ``spencer``,
         ``diagnose``, ``shake_table``.
@@ -331,6 +377,9 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     t0 = _time.perf_counter()
     say = progress_say(progress, clock=True)
     budget = budget or (QUICK if quick else FULL)
+    full_job = record is None and budget == FULL and noise in (None, FULL.noise)
+    if noise is not None:
+        budget = replace(budget, noise=noise)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timing: dict[str, float] = {}
@@ -345,6 +394,9 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     timing["compare"] = _time.perf_counter() - t
     selected = comp["selected"]
     say(f"selected by {comp['evidence_route']} evidence: {selected}")
+    t = _time.perf_counter()
+    sensitivity = noise_sensitivity(part_a, budget, comp["rows"], seed=seed, say=say)
+    timing["noise_sensitivity"] = _time.perf_counter() - t
     tab = table(comp)
     tab.to_csv(out_dir / "compare.csv", index=False)
 
@@ -372,10 +424,11 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         "record": info,
         "rows": comp["rows"], "selected": selected, "bayes_factors": comp["bayes_factors"],
         "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
+        "noise": budget.noise, "noise_sensitivity": sensitivity,
         "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
                                                      "force_nrmse": best["validation"]["force_nrmse"]},
         "spencer_1997": spencer, "diagnose": diag, "shake_table": vst, "figures": figs,
-        "stages_s": timing, "seed": seed, "full_job": record is None and budget == FULL,
+        "stages_s": timing, "seed": seed, "full_job": full_job,
     }
     summary["wall_s"] = _time.perf_counter() - t0
     summary = _strip(summary)

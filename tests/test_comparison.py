@@ -119,6 +119,12 @@ def test_run_quick_end_to_end(tmp_path):
     for name in ("compare.csv", "spencer_parameters.csv", "summary.json", "force_part_b.png"):
         assert (out / name).exists(), name
     assert list((out / "fits").glob("*.nc"))
+    # the model choice under both residual models, the comparison's own first (issue 14)
+    assert s["noise"] == "iid" and set(s["noise_sensitivity"]) == {"iid", "ar"}
+    for noise, d in s["noise_sensitivity"].items():
+        assert d["selected"] in ("dahl", "lugre") and d["bayes_factors"][d["selected"]] == 0.0
+    assert s["noise_sensitivity"]["iid"]["selected"] == s["selected"]
+    assert "AR residual model" in text
 
 
 def test_selection_route_names_the_route_the_evidence_came_by():

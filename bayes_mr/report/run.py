@@ -94,6 +94,30 @@ def spencer_table(spencer: dict) -> pd.DataFrame:
     return params
 
 
+def _noise_lines(summary: dict) -> list[str]:
+    """How the least-squares model choice and ln BF move between the iid and the AR residual model."""
+    sens = summary.get("noise_sensitivity")
+    if not sens or "iid" not in sens or "ar" not in sens:
+        return []
+    iid, ar = sens["iid"], sens["ar"]
+    if not iid["selected"] or not ar["selected"]:
+        return []
+
+    def _runner(d):
+        bf = {m: v for m, v in d["bayes_factors"].items() if m != d["selected"]}
+        return (min(bf, key=bf.get), min(bf.values())) if bf else (None, None)
+
+    (ri, bi), (ra, ba) = _runner(iid), _runner(ar)
+    n_eff = ar["n_eff"].get(ar["selected"]) or {}
+    n_txt = ", ".join(f"{ch} {fmt(v, 3)}" for ch, v in n_eff.items()) if isinstance(n_eff, dict) else fmt(n_eff, 3)
+    same = "the same model" if iid["selected"] == ar["selected"] else "a different model"
+    return [f"Residual model (least squares, Laplace evidence): with independent residuals (iid) "
+            f"**{iid['selected']}** wins by ln BF {fmt(bi, 3)} over {ri}; with the AR residual model, which "
+            f"counts the residual's correlation in time (effective independent samples: {n_txt}), "
+            f"**{ar['selected']}** ({same}) wins by ln BF {fmt(ba, 3)} over {ra}. The comparison above uses "
+            f"`--noise {summary.get('noise', 'iid')}`."]
+
+
 def headline(summary: dict) -> list[str]:
     """The sentences a structural engineer reads first (every number from this run)."""
     rows, sel = summary["rows"], summary["selected"]
@@ -107,6 +131,7 @@ def headline(summary: dict) -> list[str]:
         runner = min(bf, key=bf.get) if bf else None
         lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
                      + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
+    lines += _noise_lines(summary)
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
     if chains:
         unconverged = [r["model"] for r in chains if not r.get("converged")]
