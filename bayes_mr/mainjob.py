@@ -347,6 +347,22 @@ def _strip(d):
     return d
 
 
+def _write(summary: dict, out_dir: Path, tab, params, say) -> dict:
+    """Write ``summary.json`` and ``report.md`` under ``out_dir``; return the summary."""
+    results.write_json(summary, out_dir / "summary.json")
+    (out_dir / "report.md").write_text(report_markdown(summary, tab, params))
+    say(f"wrote {out_dir / 'report.md'} in {summary['wall_s']:.0f} s")
+    return summary
+
+
+def _timed(timing: dict[str, float], stage: str, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``, its wall time [s] recorded as ``timing[stage]``."""
+    t = _time.perf_counter()
+    out = fn(*args, **kwargs)
+    timing[stage] = _time.perf_counter() - t
+    return out
+
+
 def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, progress=True,
         budget: Budget | None = None, record: xr.Dataset | None = None, noise: str | None = None,
         stages: tuple[str, ...] = ("compare", "spencer", "diagnose", "shake_table")) -> dict:
@@ -389,14 +405,11 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     say(f"{info['samples']} samples at {info['fs']:.1f} Hz; A {info['part_a_s']:.1f} s, B {info['part_b_s']:.1f} s")
     timing["prepare"] = _time.perf_counter() - t0
 
-    t = _time.perf_counter()
-    comp = compare_forms(part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
-    timing["compare"] = _time.perf_counter() - t
+    comp = _timed(timing, "compare", compare_forms, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
     selected = comp["selected"]
     say(f"selected by {comp['evidence_route']} evidence: {selected}")
-    t = _time.perf_counter()
-    sensitivity = noise_sensitivity(part_a, budget, comp["rows"], seed=seed, say=say)
-    timing["noise_sensitivity"] = _time.perf_counter() - t
+    sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget, comp["rows"],
+                         seed=seed, say=say)
     tab = table(comp)
     tab.to_csv(out_dir / "compare.csv", index=False)
 
@@ -407,15 +420,12 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     thesis_form = _best_thesis_form(comp)
     diag: dict[str, dict] = {}
     if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
-        t = _time.perf_counter()
-        diag = diagnose_models(part_a, part_b, (selected, thesis_form), budget, seed=seed, out_dir=out_dir, say=say)
-        timing["diagnose"] = _time.perf_counter() - t
-
+        diag = _timed(timing, "diagnose", diagnose_models, part_a, part_b, (selected, thesis_form), budget,
+                      seed=seed, out_dir=out_dir, say=say)
     vst = None
     if "shake_table" in stages and thesis_form is not None:
-        t = _time.perf_counter()
-        vst = shake_table(part_a, part_b, thesis_form, budget, seed=seed, out_dir=out_dir, say=say)
-        timing["shake_table"] = _time.perf_counter() - t
+        vst = _timed(timing, "shake_table", shake_table, part_a, part_b, thesis_form, budget, seed=seed,
+                     out_dir=out_dir, say=say)
 
     best = _best_by_validation(comp["rows"])
     figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst)
@@ -431,9 +441,4 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         "stages_s": timing, "seed": seed, "full_job": full_job,
     }
     summary["wall_s"] = _time.perf_counter() - t0
-    summary = _strip(summary)
-    results.write_json(summary, out_dir / "summary.json")
-    text = report_markdown(summary, tab, params)
-    (out_dir / "report.md").write_text(text)
-    say(f"wrote {out_dir / 'report.md'} in {summary['wall_s']:.0f} s")
-    return summary
+    return _write(_strip(summary), out_dir, tab, params, say)

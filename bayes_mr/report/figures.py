@@ -58,14 +58,18 @@ def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "",
 
 
 def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, title: str = "",
-                window: tuple[float, float] | None = None) -> Figure:
-    """Stacked panels of time series: ``panels[ylabel][label] = values``."""
+                window: tuple[float, float] | None = None, colors: dict[str, str] | None = None) -> Figure:
+    """Stacked panels of time series: ``panels[ylabel][label] = values``.
+
+    ``colors`` (label → matplotlib colour) keeps one series the same colour in every panel.
+    """
     fig, axes = subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
     t = np.asarray(t)
     sl = slice(None) if window is None else (t >= window[0]) & (t <= window[1])
     for ax, (ylabel, series) in zip(axes[:, 0], panels.items()):
         for i, (label, y) in enumerate(series.items()):
-            ax.plot(t[sl], np.asarray(y)[sl], lw=0.8, label=label, alpha=1.0 if i == 0 else 0.85)
+            ax.plot(t[sl], np.asarray(y)[sl], lw=0.8, label=label, alpha=1.0 if i == 0 else 0.85,
+                    color=(colors or {}).get(label))
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
@@ -145,4 +149,27 @@ def binned(xs: dict[str, np.ndarray], r: np.ndarray, *, title: str = "", nbins: 
     axes[0, 0].set_ylabel("residual")
     fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+def command_loops(v: np.ndarray, curves: dict[str, np.ndarray], command: np.ndarray, *, title: str = "",
+                  xlabel: str = "velocity [m/s]") -> Figure:
+    """Force–velocity loops, one panel per force series [N], points coloured by the damper command.
+
+    ``command`` is the voltage [V] or current [A] at each sample; the colour bar
+    shows it, so a reader sees which branch belongs to the field on or off.
+    """
+    fig, axes = subplots(1, len(curves), figsize=(3.6 * len(curves), 3.4), sharey=True, squeeze=False)
+    v = np.asarray(v, float)
+    command = np.asarray(command, float)
+    art = None
+    for ax, (label, f) in zip(axes[0], curves.items()):
+        art = ax.scatter(v, np.asarray(f, float), c=command, s=2, cmap="viridis", rasterized=True)
+        ax.set_xlabel(xlabel)
+        ax.set_title(label, fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("force [N]")
+    if art is not None:
+        fig.colorbar(art, ax=list(axes[0]), label="command")
+    fig.suptitle(title)
     return fig

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import xarray as xr
 
 from ..identify import predict
-from .figures import hysteresis, save, time_series
+from .figures import binned, command_loops, hysteresis, save, time_series
 from .markdown import fmt, markdown_table
 
 
@@ -50,28 +51,25 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     """
     figs = {}
     t = part_b["time"].values
-    x = part_b["displacement"].values
     curves = {"measured": part_b["force"].values}
     sel = _row(rows, selected, "lsq")
+    if best is not None and sel is not None and (best["model"], best["engine"]) == (sel["model"], "lsq"):
+        best = None  # the selected model is also the best on B: one curve
     for label, r in ((f"{selected} (lsq, selected by evidence)", sel),
                      (f"{best['model']} ({best['engine']}, best on B)" if best else "", best)):
         if r is not None and label not in curves:
             try:
-                curves[label] = predict(r["model"], part_b, r["params"])["force"]
+                # the point that simulates (issue 14: a sloppy model's posterior mean need not)
+                curves[label] = predict(r["model"], part_b, r.get("point") or r["params"])["force"]
             except ValueError:
                 pass
     try:
         curves["Spencer 1997 published"] = predict("spencer", part_b, spencer["params"])["force"]
     except ValueError:
         pass
-    window = (0.0, min(4.0, float(t[-1])))
-    figs["force_b"] = str(save(time_series(t, {"force [N]": curves}, window=window,
-                                         title="part B (never fitted): damper force"),
-                             out_dir / "force_part_b.png"))
-    sl = slice(0, int(window[1] * float(part_b.attrs["fs"])))
-    figs["hysteresis_b"] = str(save(hysteresis(x, curves, window=sl, title="part B: force–displacement"),
-                                  out_dir / "hysteresis_part_b.png"))
+    figs.update(_part_b_figures(out_dir, part_b, curves))
     if vst is not None and "_vst_b" in vst:
+        window = (0.0, min(4.0, float(t[-1])))
         v = vst["_vst_b"]
         panel = {"measured damper force": v["force"].values}
         for label in ("ukf", "lsq"):
@@ -81,6 +79,53 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
         figs["shake_table"] = str(save(time_series(v["time"].values, {"force [N]": panel}, window=window,
                                                  title="virtual shake table, part B"),
                                      out_dir / "shake_table_force.png"))
+    return figs
+
+
+#: Length of the part-B window the force figure shows [s]: a few cycles of the record's motion, readable.
+WINDOW_S = 0.5
+
+
+def _part_b_figures(out_dir: Path, part_b: xr.Dataset, curves: dict[str, np.ndarray]) -> dict[str, str]:
+    """Part B as a reader checks a prediction: a 0.5 s window with the residuals under it, the loops, the
+    force–velocity plane coloured by the command, and the residual of each prediction binned by velocity.
+
+    ``curves`` holds the measured force first, then each prediction [N]. The window is the one where the
+    first prediction misses most (a 0.5 s moving RMS of its residual), so the figure shows the problem,
+    not a quiet stretch.
+    """
+    figs = {}
+    t, x = part_b["time"].values, part_b["displacement"].values
+    measured = curves["measured"]
+    preds = {k: v for k, v in curves.items() if k != "measured"}
+    n_win = max(2, min(int(WINDOW_S * float(part_b.attrs["fs"])), t.size))
+    if preds:
+        r0 = measured - next(iter(preds.values()))
+        ms = np.convolve(np.nan_to_num(r0) ** 2, np.ones(n_win), mode="valid")
+        start = int(np.argmax(ms))
+    else:
+        start = 0
+    window = (float(t[start]), float(t[min(start + n_win, t.size) - 1]))
+    panels = {"force [N]": curves, "residual [N]": {k: measured - f for k, f in preds.items()}}
+    colors = {k: f"C{i}" for i, k in enumerate(curves)}
+    figs["force_b"] = str(save(time_series(t, panels, window=window, colors=colors,
+                                         title=f"part B (never fitted): damper force, the {WINDOW_S:g} s window "
+                                               "missed most"), out_dir / "force_part_b.png"))
+    sl = slice(start, start + n_win)
+    figs["hysteresis_b"] = str(save(hysteresis(x, curves, window=sl, title="part B: force–displacement (same window)"),
+                                  out_dir / "hysteresis_part_b.png"))
+    command = next((part_b[c].values for c in ("voltage", "current") if c in part_b), None)
+    if command is not None and "velocity" in part_b:
+        first = dict(list(curves.items())[:2])
+        figs["force_velocity_b"] = str(save(command_loops(part_b["velocity"].values, first, command,
+                                                          title="part B: force–velocity, coloured by command"),
+                                          out_dir / "force_velocity_part_b.png"))
+    if preds and "velocity" in part_b:
+        label, f = next(iter(preds.items()))
+        figs["residual_velocity_b"] = str(save(binned({"velocity [m/s]": part_b["velocity"].values,
+                                                       "displacement [m]": x}, measured - f,
+                                                      title=f"part B residual of {label} [N]"),
+                                             out_dir / "residual_velocity_part_b.png"))
     return figs
 
 
@@ -193,6 +238,8 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
             f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (budget)'}"
             for r in conv) + "."]
     out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
+            "![force–velocity by command](force_velocity_part_b.png)", "",
+            "![residual by velocity](residual_velocity_part_b.png)", "",
             "## Spencer et al. (1997): published against identified", "",
             f"Source: {summary['spencer_1997']['source']}.", "", markdown_table(params), ""]
     for model, d in (summary.get("diagnose") or {}).items():
