@@ -284,6 +284,7 @@ def synthesize(
     band: float | None = None,
     source: str = "simulate",
     outputs: tuple[str, ...] | None = None,
+    input_interp: str = "linear",
 ) -> xr.Dataset:
     """A simulated test record in the package schema, with noise.
 
@@ -316,12 +317,16 @@ def synthesize(
         Seed of the noise (its entropy is stored in the record's attributes).
     band : float, optional
         Low-pass corner of the noise [Hz] (default: white up to Nyquist).
+    input_interp : {"linear", "bandlimited", "auto"}
+        The input between samples the simulation uses (:mod:`bayes_mr.input_grid`;
+        "auto": from the drive's bandwidth). Written to the record's
+        ``input_interp`` attribute, so a fit reads the input as it was simulated.
 
     Returns
     -------
     xarray.Dataset
-        Record with ``noise_sd_<channel>`` attributes and the true
-        ``force`` (damper force) channel.
+        Record with ``noise_sd_<channel>`` and ``input_interp`` attributes
+        and the true ``force`` (damper force) channel.
     """
     from .data.schema import OUTPUTS, kind_of, make_record
 
@@ -337,7 +342,8 @@ def synthesize(
     noisy = _noise_adder(noise, 1.0 / dt, np.random.default_rng(seq), band)
     attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
              "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
-    channels, sds, sim = _measure(model, theta, kind, inputs, dt, mass, noisy)
+    channels, sds, sim, interp = _measure(model, theta, kind, inputs, dt, mass, noisy, input_grid.check(input_interp))
+    attrs["input_interp"] = interp
     if outputs is not None:
         channels, sds = _keep_outputs(kind, outputs, channels, sds, OUTPUTS[kind])
     attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
@@ -372,8 +378,11 @@ def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float 
     return noisy
 
 
-def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy):
-    """Simulate and 'measure' a test: the recorded channels, their noise SDs and the simulation.
+def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy, interp: str):
+    """Simulate and 'measure' a test: the recorded channels, their noise SDs, the simulation and its input_interp.
+
+    ``interp`` ("auto" resolved from the clean input's bandwidth) reads the
+    input between samples (:class:`Inputs`).
 
     The noise is drawn in a fixed order (structure: input, displacement,
     acceleration; forced: input, displacement, velocity, acceleration;
@@ -386,6 +395,9 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
         u = np.asarray(inputs[drive], float)
         felt, sd_u = noisy(u)  # the frame (mass) feels the input + w; the record keeps the input
         rows = Inputs.structure(felt, dt, mass, volt) if kind == "structure" else Inputs.forced(felt, dt, volt, mass)
+        if interp == "auto":  # as a fit of the record will read it: from the recorded (clean) input
+            interp = input_grid.choose(Inputs.forced(u, dt).rows, kind, dt)
+        rows = rows.with_interp(interp)
         sim = simulate(model, rows, theta)
         channels = {drive: u}
         names = ("displacement", "acceleration") if kind == "structure" else ("displacement", "velocity", "acceleration")
@@ -396,8 +408,10 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
     else:
         x = np.asarray(inputs["displacement"], float)
         v = np.asarray(inputs["velocity"], float)
-        sim = simulate(model, Inputs.device(x, v, dt, volt), theta)
+        rows = Inputs.device(x, v, dt, volt).with_interp(interp)
+        interp = rows.interp
+        sim = simulate(model, rows, theta)
         channels = {}
         for name, value in (("displacement", x), ("velocity", v), ("force", sim["force"])):
             channels[name], sds[name] = noisy(value)
-    return channels, sds, sim
+    return channels, sds, sim, interp
