@@ -49,6 +49,26 @@ HALF_LEN = 24
 KAISER_BETA = 9.0
 
 
+#: How the UKF reads the input (see :func:`describe`).
+UKF_NOTE = ("the filter propagates sample to sample with the input linear between samples; the point's "
+            "simulation and scores use input_interp")
+
+
+def describe(interp: str, engine: str) -> dict:
+    """The JSON keys of a fit's input reconstruction: ``input_interp`` (and the UKF's own).
+
+    The UKF stays on the record's grid with linear inputs (``filter_input_interp``):
+    a band-limited predict would run the filter S times per sample (S up to
+    32) for each of its training runs and put its state histories, reset
+    marks and per-step process noise on a grid nothing else reads; its process
+    noise on x, ẋ already absorbs an input error between samples.
+    """
+    out = {"input_interp": interp}
+    if engine == "ukf":
+        out.update(filter_input_interp="linear", input_interp_note=UKF_NOTE)
+    return out
+
+
 def bandwidth(x: np.ndarray, dt: float, share: float = POWER_SHARE) -> float:
     """Frequency [Hz] below which ``share`` of the spectral power of ``x`` (mean removed) lies.
 

@@ -52,6 +52,7 @@ import xarray as xr
 from .data.schema import OUTPUTS
 from .inference.base import Posterior, even_indices
 from .likelihood import OutputError
+from .input_grid import describe as describe_interp
 from .noise_model import ResidualModel
 from .noise_model import describe as describe_noise
 from .scores import score
@@ -184,9 +185,6 @@ PP_DRAWS = 20
 #: Draws simulated at once for the pointwise log-likelihood (memory: batch × N × channels).
 LL_BATCH = 24
 #: What the UKF's evidence is (it keeps its own iid measurement model).
-#: How the UKF reads the input (it filters on the record's own grid, see :func:`build`).
-UKF_INPUT_NOTE = ("the filter propagates sample to sample with the input linear between samples; the point's "
-                  "simulation and scores use input_interp")
 UKF_EVIDENCE_NOTE = ("innovation likelihood of the selected UKF run under the filter's own iid measurement "
                      "model: not a marginal likelihood of the fit's noise model, not comparable with lsq/mcmc")
 
@@ -227,26 +225,11 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         force_nrmse=scores["force_nrmse"], masked=int((~lik.valid).sum()), trained=post.trained,
         diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, post.point)), rmse=scores["rmse"],
         noise_model=info.pop("noise_model"),
-        extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed), **_interp_info(lik, post)},
+        extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed), **describe_interp(lik.inputs.interp, post.engine)},
     )
     ll, ll_index = pointwise_log_likelihood(lik, post)
     return make_inference_data(summary, post, names, units, record, log_likelihood=ll, ll_index=ll_index,
                                predictive=predictive_draws(lik, post))
-
-
-def _interp_info(lik: OutputError, post: Posterior) -> dict:
-    """``input_interp`` of a fit (and the UKF's ``filter_input_interp``, ``input_interp_note``).
-
-    The UKF stays on the record's grid with linear inputs: a band-limited
-    predict would run the filter S times per sample (S up to 32) for all its
-    training runs and put its state histories, reset marks and process-noise
-    calibration on a grid no other part reads; its process noise on x, ẋ
-    already absorbs an input error between samples.
-    """
-    out = {"input_interp": lik.inputs.interp}
-    if post.engine == "ukf":
-        out.update(filter_input_interp="linear", input_interp_note=UKF_INPUT_NOTE)
-    return out
 
 
 def _noise_info(lik: OutputError, post: Posterior, sim) -> dict:

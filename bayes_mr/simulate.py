@@ -318,15 +318,13 @@ def synthesize(
     band : float, optional
         Low-pass corner of the noise [Hz] (default: white up to Nyquist).
     input_interp : {"linear", "bandlimited", "auto"}
-        The input between samples the simulation uses (:mod:`bayes_mr.input_grid`;
-        "auto": from the drive's bandwidth). Written to the record's
-        ``input_interp`` attribute, so a fit reads the input as it was simulated.
+        The input between samples (:mod:`bayes_mr.input_grid`), kept in the
+        record's attributes so a fit reads the input as it was simulated.
 
     Returns
     -------
     xarray.Dataset
-        Record with ``noise_sd_<channel>`` and ``input_interp`` attributes
-        and the true ``force`` (damper force) channel.
+        Record with ``noise_sd_<channel>`` attributes and the true ``force`` (damper force) channel.
     """
     from .data.schema import OUTPUTS, kind_of, make_record
 
