@@ -57,11 +57,15 @@ def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
 def _read(path: str, args, *, what: str = "record"):
     from .data import load
 
-    return load(
+    rec = load(
         path, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
         columns=getattr(args, "columns", None),
         quality=not getattr(args, "no_quality", False), trim=getattr(args, "trim", False),
     )
+    interp = getattr(args, "input_interp", "auto")
+    if interp != "auto":  # the record attribute every simulation of it reads (bayes_mr.input_grid)
+        rec.attrs["input_interp"] = interp
+    return rec
 
 
 def _executor(args):
@@ -119,10 +123,10 @@ def cmd_simulate(args) -> int:
     theta = model.theta(kind, params)
     outputs = tuple(c.strip() for c in args.outputs.split(",") if c.strip()) if args.outputs else None
     rec = synthesize(model, theta, time, inputs, mass=args.mass if kind != "device" else None,
-                     noise=args.noise, seed=args.seed, source=source, outputs=outputs)
+                     noise=args.noise, seed=args.seed, source=source, outputs=outputs, input_interp=args.input_interp)
     path = write_record(rec, args.output)
-    print(f"wrote {path}: {kind} test, {rec.sizes['time']} samples at {rec.attrs['fs']:.6g} Hz, model {model.name}",
-          file=sys.stderr)
+    print(f"wrote {path}: {kind} test, {rec.sizes['time']} samples at {rec.attrs['fs']:.6g} Hz, model {model.name}, "
+          f"input {rec.attrs['input_interp']}", file=sys.stderr)
     return 0
 
 

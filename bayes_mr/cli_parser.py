@@ -20,6 +20,14 @@ def _common_data_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-quality", action="store_true",
                    help="do not mask clipped, spiky or disturbed samples (quality control is on by default)")
     p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")
+    _input_interp_flag(p)
+
+
+def _input_interp_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--input-interp", choices=("auto", "linear", "bandlimited"), default="auto",
+                   help="the input between samples: linear, or the drive reconstructed band-limited (polyphase, "
+                        "S× finer grid; the command stays linear); auto (default): the record's input_interp "
+                        "attribute, else band-limited when the drive has content near the Nyquist rate")
 
 
 def _job_flags(p: argparse.ArgumentParser, *, out: str | None, json: tuple[str, str]) -> None:
@@ -78,6 +86,7 @@ def _simulate_parser(sub, forms: str, effects: str) -> None:
     p.add_argument("--noise", type=float, default=0.0,
                    help="noise as a fraction of each channel's RMS on input and outputs (0.01 = 1 %%)")
     p.add_argument("--seed", type=int, default=0, help="random seed (noise and random signals)")
+    _input_interp_flag(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output record (.csv, .csv.gz or .nc)")
 
 

@@ -38,6 +38,7 @@ from .inference.estimators import engine
 from .identify import validate as validate_fit
 from .models import get_model
 from .progress import say as progress_say
+from .simulate import Inputs
 
 #: Route of each engine's ``log_evidence``, in order of preference for selection.
 #: Evidence routes a comparison selects by, in order of preference. The UKF's innovation likelihood is
@@ -182,7 +183,8 @@ def compare(
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
     out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
            "evidence_engine": eng, **verdict, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
-           "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0}
+           "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
+           "input_interp": Inputs.from_record(record).interp}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     out["idata"] = fits

@@ -31,10 +31,12 @@ from .simulate import Inputs, simulate
 __all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate"]
 
 
-def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float]) -> dict[str, np.ndarray]:
+def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
+            input_interp: str = "auto") -> dict[str, np.ndarray]:
     """Simulated channels of ``model`` at parameters ``theta`` [SI] under ``record``'s inputs.
 
-    Missing parameters (the form's fixed ones) take their defaults.
+    Missing parameters (the form's fixed ones) take their defaults; the
+    input between samples is read as ``input_interp`` says (:class:`Inputs`).
 
     Raises
     ------
@@ -42,7 +44,7 @@ def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float]) -> 
         The simulation diverged (names the sample).
     """
     model = get_model(model)
-    sim = simulate(model, Inputs.from_record(record), model.theta(record.attrs["kind"], theta))
+    sim = simulate(model, Inputs.from_record(record, input_interp), model.theta(record.attrs["kind"], theta))
     if not sim.ok.all():
         raise ValueError(f"{model.name} diverged at sample {int(sim.failed[0])} of {record.attrs.get('source')}")
     return dict(sim.outputs)
@@ -71,6 +73,9 @@ class Identify:
         innovation likelihood of its selected run, not comparable with the
         other engines' (the fit JSON's ``evidence_note`` says so); only its
         scores and pointwise log-likelihood use ``noise``.
+    input_interp : {"auto", "linear", "bandlimited"}
+        The input between samples (:mod:`bayes_mr.input_grid`): "auto" reads
+        the record's ``input_interp`` attribute, else its drive's bandwidth.
     """
 
     model: Model | str
@@ -78,11 +83,12 @@ class Identify:
     ranges: dict | None = None
     fixed: dict | None = None
     noise: str = "iid"
+    input_interp: str = "auto"
 
     def likelihood(self, record: xr.Dataset) -> OutputError:
         """The binding of (model, record, noise model) every estimator consumes."""
         return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
-                           residual=self.noise)
+                           residual=self.noise, input_interp=self.input_interp)
 
     def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
         """Fit and return InferenceData (see :mod:`bayes_mr.results`); ``wall_s`` is the whole fit's."""
@@ -115,7 +121,8 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         The ``fit`` JSON keys for the new record: the fitted parameters, the
         scores of the point estimate's prediction over the scored samples
         (``mse`` over ``mse_channels``, ``rmse`` per measured channel [SI]),
-        and ``warmup_s``.
+        ``warmup_s`` and the new record's ``input_interp`` (its attribute,
+        else from its drive's bandwidth).
     """
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
@@ -124,13 +131,14 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         raise ValueError(f"warmup must be a non-negative number of seconds, got {warmup}")
     t0 = _time.perf_counter()
     # parameters held fixed in the fit are not in the point estimate; without them the defaults would be used
-    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)})
+    interp = Inputs.from_record(record).interp
+    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)}, interp)
     scores = score(_after(record, warmup), pred)
     out = summary.to_dict()
     out.update(
         mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)),
-        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0,
+        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0, input_interp=interp,
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )

@@ -221,6 +221,9 @@ class OutputError:
     residual : {"iid", "ar"} or ResidualModel
         Residual model: independent Gaussian errors, or an AR(p_c) process per
         channel (σ_c then is the innovation SD; see :mod:`bayes_mr.noise_model`).
+    input_interp : {"auto", "linear", "bandlimited"}
+        The input between samples (:mod:`bayes_mr.input_grid`); "auto": the
+        record's ``input_interp`` attribute, else from the drive's bandwidth.
 
     Notes
     -----
@@ -239,6 +242,7 @@ class OutputError:
         noise_sd: np.ndarray | None = None,
         scales: Scales | None = None,
         residual: str | ResidualModel = "iid",
+        input_interp: str = "auto",
     ):
         if noise not in ("sampled", "fixed"):
             raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
@@ -252,7 +256,7 @@ class OutputError:
         self.scales = scales or record_scales(record)
         self.par = Parameterisation.build(model, self.kind, self.scales, ranges=ranges, fixed=fixed)
         self.model = self.par.model
-        self.inputs = Inputs.from_record(record)
+        self.inputs = Inputs.from_record(record, input_interp)
         self.channels = outputs_of(record)
         y = np.column_stack([record[c].values for c in self.channels])
         self.valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(y.shape[0], bool)

@@ -52,6 +52,7 @@ import xarray as xr
 from .data.schema import OUTPUTS
 from .inference.base import Posterior, even_indices
 from .likelihood import OutputError
+from .input_grid import describe as describe_interp
 from .noise_model import ResidualModel
 from .noise_model import describe as describe_noise
 from .scores import score
@@ -223,7 +224,8 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         log_evidence=post.log_evidence, mse=scores["mse"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], masked=int((~lik.valid).sum()), trained=post.trained,
         diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, post.point)), rmse=scores["rmse"],
-        noise_model=info.pop("noise_model"), extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed)},
+        noise_model=info.pop("noise_model"),
+        extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed), **describe_interp(lik.inputs.interp, post.engine)},
     )
     ll, ll_index = pointwise_log_likelihood(lik, post)
     return make_inference_data(summary, post, names, units, record, log_likelihood=ll, ll_index=ll_index,

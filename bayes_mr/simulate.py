@@ -1,7 +1,9 @@
 """Fixed-step simulation of any model under any input, compiled and batched.
 
 RK4 as in the thesis (3-9), on the record's own sample grid, with the input
-linear between samples. Each sample interval is split into as many RK4
+linear between samples — or, for an input with content near the Nyquist rate,
+on a grid S times finer with the drive reconstructed band-limited
+(:mod:`bayes_mr.input_grid`; ``Inputs.interp``). Each sample interval is split into as many RK4
 sub-steps as a local stability/accuracy bound asks for (h·λ ≤ c_acc, λ the
 fastest local rate of the model, see :func:`bayes_mr.models.kernel.rate`),
 so a stiff Dahl or Spencer law stays stable at a coarse sampling rate without
@@ -16,11 +18,13 @@ differences then see the model, not the step control.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import xarray as xr
 
+from . import input_grid
 from .models import Model, get_model
 from .models.drivers import run_batch
 
@@ -53,12 +57,35 @@ class Inputs:
     mass : float or None
         Storey mass [kg] (structure tests); a forced test's mass is its
         parameter ``m`` (this field only records a known one).
+    interp : {"linear", "bandlimited"}
+        The input between samples (:mod:`bayes_mr.input_grid`): linear, or
+        the drive reconstructed band-limited on a grid :attr:`upsample`
+        times finer (the command column stays linear).
     """
 
     kind: str
     dt: float
     rows: np.ndarray
     mass: float | None = None
+    interp: str = "linear"
+
+    def __post_init__(self):
+        if self.interp not in input_grid.INTERPS:
+            raise ValueError(f"Inputs.interp must be one of {', '.join(input_grid.INTERPS)}, got {self.interp!r}")
+
+    @cached_property
+    def upsample(self) -> int:
+        """Simulation steps per sample interval: 1 (linear), else chosen from the drive's bandwidth."""
+        if self.interp == "linear":
+            return 1
+        return input_grid.factor(self.rows, self.kind, self.dt)
+
+    @cached_property
+    def grid_rows(self) -> np.ndarray:
+        """Kernel input rows on the simulation grid ``dt / upsample``, (upsample·(N−1)+1, 3)."""
+        if self.upsample == 1:
+            return self.rows
+        return input_grid.upsample(self.rows, self.kind, self.upsample)
 
     @property
     def n(self) -> int:
@@ -69,8 +96,13 @@ class Inputs:
         return np.arange(self.n) * self.dt
 
     @classmethod
-    def from_record(cls, record: xr.Dataset) -> "Inputs":
-        """Inputs of a record in the package schema."""
+    def from_record(cls, record: xr.Dataset, interp: str | None = None) -> "Inputs":
+        """Inputs of a record in the package schema.
+
+        ``interp`` ("linear", "bandlimited"; None or "auto": the record's
+        ``input_interp`` attribute when it has one, else chosen from the
+        drive's bandwidth, :func:`bayes_mr.input_grid.choose`).
+        """
         kind = record.attrs["kind"]
         n = record.sizes["time"]
         rows = np.zeros((n, 3))
@@ -90,7 +122,9 @@ class Inputs:
                 )
             rows[:, 1] = record["velocity"].values
             mass = None
-        return cls(kind, float(record.attrs["dt"]), rows, mass)
+        dt = float(record.attrs["dt"])
+        declared = interp if interp not in (None, "auto") else record.attrs.get("input_interp")
+        return cls(kind, dt, rows, mass, input_grid.choose(rows, kind, dt, declared))
 
     @classmethod
     def structure(cls, ground_acceleration, dt: float, mass: float, voltage=None) -> "Inputs":
@@ -124,7 +158,13 @@ class Inputs:
         return cls("device", float(dt), rows, None)
 
     def slice(self, start: int, stop: int) -> "Inputs":
-        return Inputs(self.kind, self.dt, self.rows[start:stop].copy(), self.mass)
+        return Inputs(self.kind, self.dt, self.rows[start:stop].copy(), self.mass, self.interp)
+
+    def with_interp(self, interp: str | None) -> "Inputs":
+        """These inputs read another way ("linear", "bandlimited"; None or "auto": chosen by bandwidth)."""
+        if interp in (None, "auto"):
+            interp = input_grid.choose(self.rows, self.kind, self.dt)
+        return self if interp == self.interp else replace(self, interp=interp)
 
 
 @dataclass(frozen=True)
@@ -137,8 +177,9 @@ class Simulation:
         Channel → array of shape (B, N) (or (N,) for a single parameter set).
     failed : ndarray of int, shape (B,)
         Sample where the state became non-finite, or -1.
-    schedule : ndarray of int, shape (B, N-1)
-        RK4 sub-steps used in each sample interval.
+    schedule : ndarray of int, shape (B, S·(N-1))
+        RK4 sub-steps used in each interval of the simulation grid (S =
+        ``Inputs.upsample``: 1 unless the input is reconstructed band-limited).
     """
 
     outputs: dict[str, np.ndarray]
@@ -176,8 +217,9 @@ def simulate(
         Sub-step bound: RK4 sub-steps per sample are ceil(h·λ / c_acc).
     n_max : int
         Most sub-steps per sample.
-    schedule : ndarray of int, shape (N-1,), optional
-        Replay these sub-steps for every member instead of choosing them.
+    schedule : ndarray of int, shape (S·(N-1),), optional
+        Replay these sub-steps for every member instead of choosing them (a
+        previous :attr:`Simulation.schedule` row of the same inputs).
 
     Returns
     -------
@@ -197,12 +239,15 @@ def simulate(
     names = OUTPUT_NAMES[kind]
     out = np.empty((B, N, len(names)))
     failed = np.empty(B, dtype=np.int64)
-    if schedule is None:
-        schedules = np.zeros((B, max(N - 1, 1)), dtype=np.int64)
-        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, False, failed)
-    else:
+    S, rows = inputs.upsample, inputs.grid_rows
+    replay = schedule is not None
+    if replay:
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
-        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, True, failed)
+    else:
+        schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
+    run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S)
+    # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
+    failed = np.where(failed >= 0, (failed + S - 1) // S, -1)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}
     channel = model.delay_channel(kind)
     if channel is not None:
@@ -239,6 +284,7 @@ def synthesize(
     band: float | None = None,
     source: str = "simulate",
     outputs: tuple[str, ...] | None = None,
+    input_interp: str = "linear",
 ) -> xr.Dataset:
     """A simulated test record in the package schema, with noise.
 
@@ -271,12 +317,14 @@ def synthesize(
         Seed of the noise (its entropy is stored in the record's attributes).
     band : float, optional
         Low-pass corner of the noise [Hz] (default: white up to Nyquist).
+    input_interp : {"linear", "bandlimited", "auto"}
+        The input between samples (:mod:`bayes_mr.input_grid`), kept in the
+        record's attributes so a fit reads the input as it was simulated.
 
     Returns
     -------
     xarray.Dataset
-        Record with ``noise_sd_<channel>`` attributes and the true
-        ``force`` (damper force) channel.
+        Record with ``noise_sd_<channel>`` attributes and the true ``force`` (damper force) channel.
     """
     from .data.schema import OUTPUTS, kind_of, make_record
 
@@ -292,7 +340,8 @@ def synthesize(
     noisy = _noise_adder(noise, 1.0 / dt, np.random.default_rng(seq), band)
     attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
              "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
-    channels, sds, sim = _measure(model, theta, kind, inputs, dt, mass, noisy)
+    channels, sds, sim, interp = _measure(model, theta, kind, inputs, dt, mass, noisy, input_grid.check(input_interp))
+    attrs["input_interp"] = interp
     if outputs is not None:
         channels, sds = _keep_outputs(kind, outputs, channels, sds, OUTPUTS[kind])
     attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
@@ -327,8 +376,11 @@ def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float 
     return noisy
 
 
-def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy):
-    """Simulate and 'measure' a test: the recorded channels, their noise SDs and the simulation.
+def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy, interp: str):
+    """Simulate and 'measure' a test: the recorded channels, their noise SDs, the simulation and its input_interp.
+
+    ``interp`` ("auto" resolved from the clean input's bandwidth) reads the
+    input between samples (:class:`Inputs`).
 
     The noise is drawn in a fixed order (structure: input, displacement,
     acceleration; forced: input, displacement, velocity, acceleration;
@@ -341,6 +393,9 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
         u = np.asarray(inputs[drive], float)
         felt, sd_u = noisy(u)  # the frame (mass) feels the input + w; the record keeps the input
         rows = Inputs.structure(felt, dt, mass, volt) if kind == "structure" else Inputs.forced(felt, dt, volt, mass)
+        if interp == "auto":  # as a fit of the record will read it: from the recorded (clean) input
+            interp = input_grid.choose(Inputs.forced(u, dt).rows, kind, dt)
+        rows = rows.with_interp(interp)
         sim = simulate(model, rows, theta)
         channels = {drive: u}
         names = ("displacement", "acceleration") if kind == "structure" else ("displacement", "velocity", "acceleration")
@@ -351,8 +406,10 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
     else:
         x = np.asarray(inputs["displacement"], float)
         v = np.asarray(inputs["velocity"], float)
-        sim = simulate(model, Inputs.device(x, v, dt, volt), theta)
+        rows = Inputs.device(x, v, dt, volt).with_interp(interp)
+        interp = rows.interp
+        sim = simulate(model, rows, theta)
         channels = {}
         for name, value in (("displacement", x), ("velocity", v), ("force", sim["force"])):
             channels[name], sds[name] = noisy(value)
-    return channels, sds, sim
+    return channels, sds, sim, interp

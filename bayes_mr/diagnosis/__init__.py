@@ -154,7 +154,8 @@ def diagnose(
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
     validation = _validate(base, ext, validate, record) if validate is not None else None
     out = _report(record, base, ext, selected, rounds, validation, baselines)
-    out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed)
+    out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed,
+               input_interp=base.lik.inputs.interp)
     out.update(_unexplained(record, before, after, [c.name for c in selected]))
     if out_dir is not None:
         out["wall_s"] = round(_time.perf_counter() - t0, 2)

@@ -38,7 +38,7 @@ def _write_out(lay, cst, p, a, s, f_r, f_d, out):
 
 
 @hot
-def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work):
+def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every):
     ns = lay[L_NS]
     N = inputs.shape[0]
     for q in range(ns):
@@ -46,9 +46,10 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
     for k in range(N):
         t = k * h
         f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
-        _write_out(lay, cst, p, inputs[k], s, f_r, f_d, out[k])
+        if k % every == 0:
+            _write_out(lay, cst, p, inputs[k], s, f_r, f_d, out[k // every])
         if not math.isfinite(f_r):
-            for kk in range(k, N):
+            for kk in range((k + every - 1) // every, out.shape[0]):
                 for j in range(out.shape[1]):
                     out[kk, j] = np.nan
             return k
@@ -65,14 +66,16 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
 
 
 @driver
-def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
-    """Simulate one parameter set from rest over all samples.
+def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
+    """Simulate one parameter set from rest over all input rows.
 
     Parameters
     ----------
-    out : ndarray, shape (N, n_out)
+    out : ndarray, shape ((N-1)//every + 1, n_out)
         Structure and forced: displacement, velocity, absolute acceleration, damper force.
-        Device: force (total), damper force.
+        Device: force (total), damper force. Written at every ``every``-th
+        input row (a band-limited input upsampled by ``every``, see
+        :mod:`bayes_mr.input_grid`).
     schedule : int64 ndarray, shape (N-1,)
         Sub-steps per interval: written when ``use_schedule`` is False, read
         when True (so perturbed parameter sets integrate on the same grid).
@@ -80,25 +83,25 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule):
     Returns
     -------
     failed_at : int
-        Sample index where the state became non-finite, or -1.
+        Input row where the state became non-finite, or -1.
     """
     ns = lay[L_NS]
     s = np.zeros(ns)
     k1 = np.zeros(ns)
     work = np.zeros((5, max(ns, 3)))
-    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work)
+    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every)
 
 
 @driver(parallel=True)
-def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed):
+def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed, every=1):
     """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
 
-    ``out`` has shape (B, N, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
+    ``out`` has shape (B, (N-1)//every + 1, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
     When ``use_schedule`` is True every member uses ``schedules[0]``.
     """
     B = P.shape[0]
     for b in prange(B):
         if use_schedule:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True)
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True, every)
         else:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False)
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False, every)
