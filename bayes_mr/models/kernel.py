@@ -53,7 +53,17 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
-LAYOUT_SIZE = L_OBS + N_OBS
+# library terms (bayes_mr.models.terms): up to N_TERMS terms θ_j·b_j, b_j chosen by a code
+L_TP = L_OBS + N_OBS  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
+N_TERMS = 3
+L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
+L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
+LAYOUT_SIZE = L_SUL + 1
+
+# --- library-term codes: code = f1 + 16·f2 + 256·f3 + 4096·target ------------------
+# factor codes (0 = absent, i.e. 1): the states and inputs the basis multiplies
+TF_X, TF_XD, TF_Z, TF_U, TF_UL, TF_AX, TF_AXD, TF_AZ, TF_SX, TF_SXD, TF_SZ = range(1, 12)
+TERM_FORCE, TERM_LAW = 0, 1  # target: added to the damper force, or to the hysteretic-state rate ż
 
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
@@ -70,6 +80,60 @@ def _sgn(v):
     if v < 0.0:
         return -1.0
     return 0.0
+
+
+@hot(inline="always")
+def _factor(c, x, xd, z, u, ul):
+    """Factor code ``c`` (TF_*) of a library term at (x, ẋ, z, command u, lagged command)."""
+    if c == 0:
+        return 1.0
+    if c == TF_X:
+        return x
+    if c == TF_XD:
+        return xd
+    if c == TF_Z:
+        return z
+    if c == TF_U:
+        return u
+    if c == TF_UL:
+        return ul
+    if c == TF_AX:
+        return abs(x)
+    if c == TF_AXD:
+        return abs(xd)
+    if c == TF_AZ:
+        return abs(z)
+    if c == TF_SX:
+        return _sgn(x)
+    if c == TF_SXD:
+        return _sgn(xd)
+    return _sgn(z)
+
+
+@hot(inline="always")
+def term_basis(code, x, xd, z, u, ul):
+    """Basis value b of a library-term ``code`` (its three factors' product; the target bits ignored)."""
+    return (_factor(code % 16, x, xd, z, u, ul) * _factor((code // 16) % 16, x, xd, z, u, ul)
+            * _factor((code // 256) % 16, x, xd, z, u, ul))
+
+
+@hot(inline="always")
+def _terms(lay, p, s, x, xd, v, iz, ds):
+    """Add the library terms: law terms to ds[iz] (ż), and return the sum of the force terms [N]."""
+    f = 0.0
+    z = s[iz]
+    ul = s[lay[L_SUL]] if lay[L_SUL] >= 0 else 0.0
+    for j in range(N_TERMS):
+        jp = lay[L_TP + j]
+        if jp < 0:
+            continue
+        code = lay[L_TC + j]
+        val = p[jp] * term_basis(code, x, xd, z, v, ul)
+        if code // 4096 == TERM_LAW:
+            ds[iz] += val
+        else:
+            f += val
+    return f
 
 
 @hot(inline="always")
@@ -204,6 +268,8 @@ def deriv(lay, cst, p, t, a, s, ds):
             f_d += m_s * p[o + 3] * zd  # ε ż
         f_frame = c * xd + m_k * k * x
 
+    if lay[L_TP] >= 0:
+        f_d += _terms(lay, p, s, x, xd, v, i + 1 if form == SPENCER else i, ds)
     if lay[L_F0] >= 0:
         f_d += p[lay[L_F0]]
     if lay[L_VD] >= 0:
