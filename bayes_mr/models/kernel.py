@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
+from .term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
@@ -60,11 +61,6 @@ L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
 L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
 LAYOUT_SIZE = L_SUL + 1
 
-# --- library-term codes: code = f1 + 16·f2 + 256·f3 + 4096·target ------------------
-# factor codes (0 = absent, i.e. 1): the states and inputs the basis multiplies
-TF_X, TF_XD, TF_Z, TF_U, TF_UL, TF_AX, TF_AXD, TF_AZ, TF_SX, TF_SXD, TF_SZ = range(1, 12)
-TERM_FORCE, TERM_LAW = 0, 1  # target: added to the damper force, or to the hysteretic-state rate ż
-
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
 K_TENV = 1  # amplitude-envelope decay time [s]
@@ -80,41 +76,6 @@ def _sgn(v):
     if v < 0.0:
         return -1.0
     return 0.0
-
-
-@hot(inline="always")
-def _factor(c, x, xd, z, u, ul):
-    """Factor code ``c`` (TF_*) of a library term at (x, ẋ, z, command u, lagged command)."""
-    if c == 0:
-        return 1.0
-    if c == TF_X:
-        return x
-    if c == TF_XD:
-        return xd
-    if c == TF_Z:
-        return z
-    if c == TF_U:
-        return u
-    if c == TF_UL:
-        return ul
-    if c == TF_AX:
-        return abs(x)
-    if c == TF_AXD:
-        return abs(xd)
-    if c == TF_AZ:
-        return abs(z)
-    if c == TF_SX:
-        return _sgn(x)
-    if c == TF_SXD:
-        return _sgn(xd)
-    return _sgn(z)
-
-
-@hot(inline="always")
-def term_basis(code, x, xd, z, u, ul):
-    """Basis value b of a library-term ``code`` (its three factors' product; the target bits ignored)."""
-    return (_factor(code % 16, x, xd, z, u, ul) * _factor((code // 16) % 16, x, xd, z, u, ul)
-            * _factor((code // 256) % 16, x, xd, z, u, ul))
 
 
 @hot(inline="always")

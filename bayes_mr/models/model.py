@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel
+from . import kernel, term_kernel
 from .effects import Effect
 from .params import F_V, F_X, Coordinates, ParamSpec, Scales
 
@@ -301,7 +301,7 @@ class Model:
             lay[kernel.L_SUL] = states.index("u")
         for j, e in enumerate(terms):
             c = int(e.options["term_code"])
-            if lay[kernel.L_SUL] < 0 and kernel.TF_UL in (c % 16, (c // 16) % 16, (c // 256) % 16):
+            if lay[kernel.L_SUL] < 0 and term_kernel.TF_UL in (c % 16, (c // 16) % 16, (c // 256) % 16):
                 raise ValueError(f"{self.name}: '{e.name}' needs a lagged command (spencer or +voltage_dependence)")
             lay[kernel.L_TP + j] = names.index(e.params[0].name)
             lay[kernel.L_TC + j] = c

@@ -31,22 +31,22 @@ over the basis's scale).
 
 from __future__ import annotations
 
-from . import kernel
+from . import kernel, term_kernel
 from .effects import Effect
 from .params import ParamSpec
 
 #: Factor name → (kernel code, short token of the parameter name, base quantity).
 FACTORS = {
-    "x": (kernel.TF_X, "x", "x"), "xdot": (kernel.TF_XD, "xd", "xdot"), "z": (kernel.TF_Z, "z", "z"),
-    "u": (kernel.TF_U, "u", "u"), "ulag": (kernel.TF_UL, "ul", "ulag"),
-    "abs(x)": (kernel.TF_AX, "ax", "x"), "abs(xdot)": (kernel.TF_AXD, "axd", "xdot"),
-    "abs(z)": (kernel.TF_AZ, "az", "z"),
-    "sgn(x)": (kernel.TF_SX, "sx", None), "sgn(xdot)": (kernel.TF_SXD, "sxd", None),
-    "sgn(z)": (kernel.TF_SZ, "sz", None),
+    "x": (term_kernel.TF_X, "x", "x"), "xdot": (term_kernel.TF_XD, "xd", "xdot"), "z": (term_kernel.TF_Z, "z", "z"),
+    "u": (term_kernel.TF_U, "u", "u"), "ulag": (term_kernel.TF_UL, "ul", "ulag"),
+    "abs(x)": (term_kernel.TF_AX, "ax", "x"), "abs(xdot)": (term_kernel.TF_AXD, "axd", "xdot"),
+    "abs(z)": (term_kernel.TF_AZ, "az", "z"),
+    "sgn(x)": (term_kernel.TF_SX, "sx", None), "sgn(xdot)": (term_kernel.TF_SXD, "sxd", None),
+    "sgn(z)": (term_kernel.TF_SZ, "sz", None),
 }
 _ORDER = {name: i for i, name in enumerate(FACTORS)}
 #: Term kinds: model-name prefix → (kernel target, parameter-name prefix).
-TARGETS = {"term": (kernel.TERM_FORCE, "tf_"), "zterm": (kernel.TERM_LAW, "tz_")}
+TARGETS = {"term": (term_kernel.TERM_FORCE, "tf_"), "zterm": (term_kernel.TERM_LAW, "tz_")}
 #: Forms whose hysteretic state is dimensionless (the others' z is a displacement).
 UNIT_Z_FORMS = ("normalized-bouc-wen", "dahl")
 #: Plausible |θ| up to SPAN × its record-scale reference.
