@@ -141,6 +141,9 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
+    p.add_argument("--terms", action=argparse.BooleanOptionalAction, default=None,
+                   help="search the library of terms (products of x, xdot, z, u, |.|, sgn) for what the model "
+                        "leaves (default: when the verdict is 'unexplained by the vocabulary')")
     _executor_flags(p, "the candidate effects' fits")
     _job_flags(p, out="write the Markdown report, figures, baseline.nc and extended.nc here",
                json=("REPORT.json", "write the report here (default: stdout)"))

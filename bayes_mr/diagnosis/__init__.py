@@ -37,7 +37,8 @@ from ..scores import score
 from .fits import Fit, fit_model, inference_data, predict
 from .residuals import residual_views, varying_voltage
 from .screen import THRESHOLD, Candidate, forward_select
-from .unexplained import FLOOR_RATIO, unexplained, verdict, worst_ratio
+from .terms import search_terms
+from .unexplained import BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 
 __all__ = ["FORMS", "THRESHOLD", "diagnose", "select_baseline"]
 
@@ -94,7 +95,7 @@ def diagnose(
     seed: int = 0, progress=True, threshold: float = THRESHOLD,
     max_effects: int = 3,
     settings: LSQSettings | None = None, noise: str = "iid",
-    executor=None,
+    executor=None, terms: bool | None = None,
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -126,20 +127,20 @@ def diagnose(
         Residual model of the fits (extensions keep the baseline's AR orders).
     executor : object, optional
         Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
+    terms : bool, optional
+        Search the term library (:mod:`.terms`): always, never, or (None) on "unexplained by the vocabulary".
 
     Returns
     -------
     dict
         The SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
-        ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate
-        ranked, ``{name, score, ...}``), ``extended`` {model, mse,
-        log_evidence}, ``gain`` {mse_ratio, delta_log_evidence,
-        validation_mse_ratio} — and ``effects`` (all effects named, in the
+        ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``),
+        ``extended`` {model, mse, log_evidence}, ``gain`` {mse_ratio, delta_log_evidence, validation_mse_ratio} — and ``effects`` (all effects named, in the
         order they were added), ``selection`` (each forward-selection round),
         ``masked``, ``threshold``, ``residuals`` (before/after summaries),
         ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``;
         ``unexplained``, ``unexplained_ratio``, ``at_noise_floor``, ``verdict``
-        (:func:`_unexplained`); with ``out_dir``, ``results`` (the ``.nc`` paths).
+        (:func:`_unexplained`); ``terms`` (:func:`_search`); with ``out_dir``, ``results`` (the ``.nc`` paths).
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
@@ -154,9 +155,9 @@ def diagnose(
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
     validation = _validate(base, ext, validate, record) if validate is not None else None
     out = _report(record, base, ext, selected, rounds, validation, baselines)
-    out.update(threshold=threshold, residuals={"before": before.summary(), "after": after.summary()}, seed=seed,
-               input_interp=base.lik.inputs.interp)
-    out.update(_unexplained(record, before, after, [c.name for c in selected]))
+    out.update(_unexplained(record, before, after, [c.name for c in selected]), threshold=threshold, seed=seed,
+               residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
+    out["terms"] = _search(record, ext, out["verdict"] if terms is None else terms, seed, threshold, say)
     if out_dir is not None:
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
@@ -183,6 +184,17 @@ def _unexplained(record: xr.Dataset, before, after, effects: list[str]) -> dict:
     worst = _num(worst_ratio(unexp))
     return {"unexplained": unexp, "verdict": verdict(effects, unexp), "unexplained_ratio": worst,  # worst channel
             "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO}
+
+
+def _search(record: xr.Dataset, ext: Fit, ask: bool | str, seed: int, threshold: float, say) -> dict | None:
+    """The term search (:mod:`.terms`) on the final model: ``ask`` True/False, or the verdict (runs on
+    "unexplained by the vocabulary"); None when it does not run."""
+    if ask is False or (isinstance(ask, str) and ask != BEYOND):
+        return None
+    found, _ = search_terms(record, ext, seed=seed, threshold=threshold, progress=say)
+    found["asked"] = "explicitly" if ask is True else f"verdict '{BEYOND}'"
+    say(f"terms kept: {', '.join(found['kept']) or 'none'}")
+    return found
 
 
 def _write(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before, after, rounds, out_dir: Path,

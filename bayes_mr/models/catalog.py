@@ -10,10 +10,14 @@ from __future__ import annotations
 from .effects import EFFECTS, NONE
 from .forms import FORMS
 from .model import Model
+from .terms import is_term, make
 
 
 def get_model(name: str | Model) -> Model:
     """Parse ``FORM[+EFFECT...]`` (e.g. ``"spencer+force_offset+sensor_delay"``).
+
+    An effect may also be a library term, ``term(EXPR)`` or ``zterm(EXPR)``
+    (:mod:`bayes_mr.models.terms`), e.g. ``"spencer+term(u*abs(xdot))"``.
 
     Parameters
     ----------
@@ -39,6 +43,9 @@ def get_model(name: str | Model) -> Model:
     model = Model(FORMS[parts[0]])
     for p in parts[1:]:
         if p == NONE:
+            continue
+        if is_term(p):
+            model = model + make(p, model.form.name)
             continue
         if p not in EFFECTS:
             raise ValueError(f"unknown effect '{p}'; valid: {', '.join(EFFECTS)}")

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
+from .term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
@@ -53,7 +54,12 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
-LAYOUT_SIZE = L_OBS + N_OBS
+# library terms (bayes_mr.models.terms): up to N_TERMS terms θ_j·b_j, b_j chosen by a code
+L_TP = L_OBS + N_OBS  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
+N_TERMS = 3
+L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
+L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
+LAYOUT_SIZE = L_SUL + 1
 
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
@@ -70,6 +76,25 @@ def _sgn(v):
     if v < 0.0:
         return -1.0
     return 0.0
+
+
+@hot(inline="always")
+def _terms(lay, p, s, x, xd, v, iz, ds):
+    """Add the library terms: law terms to ds[iz] (ż), and return the sum of the force terms [N]."""
+    f = 0.0
+    z = s[iz]
+    ul = s[lay[L_SUL]] if lay[L_SUL] >= 0 else 0.0
+    for j in range(N_TERMS):
+        jp = lay[L_TP + j]
+        if jp < 0:
+            continue
+        code = lay[L_TC + j]
+        val = p[jp] * term_basis(code, x, xd, z, v, ul)
+        if code // 4096 == TERM_LAW:
+            ds[iz] += val
+        else:
+            f += val
+    return f
 
 
 @hot(inline="always")
@@ -204,6 +229,8 @@ def deriv(lay, cst, p, t, a, s, ds):
             f_d += m_s * p[o + 3] * zd  # ε ż
         f_frame = c * xd + m_k * k * x
 
+    if lay[L_TP] >= 0:
+        f_d += _terms(lay, p, s, x, xd, v, i + 1 if form == SPENCER else i, ds)
     if lay[L_F0] >= 0:
         f_d += p[lay[L_F0]]
     if lay[L_VD] >= 0:

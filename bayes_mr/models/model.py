@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel
+from . import kernel, term_kernel
 from .effects import Effect
 from .params import F_V, F_X, Coordinates, ParamSpec, Scales
 
@@ -289,7 +289,22 @@ class Model:
             lay[kernel.L_SU] = states.index("u")
         if self.effect("small_amplitude_regime"):
             lay[kernel.L_SE] = states.index("envelope")
+        self._term_slots(lay, names, states)
         return lay
+
+    def _term_slots(self, lay: np.ndarray, names: tuple[str, ...], states: tuple[str, ...]) -> None:
+        """Layout slots of the library terms (:mod:`bayes_mr.models.terms`): θ index and code."""
+        terms = [e for e in self.effects if "term_code" in e.options]
+        if len(terms) > kernel.N_TERMS:
+            raise ValueError(f"{self.name}: at most {kernel.N_TERMS} library terms per model")
+        if "u" in states:
+            lay[kernel.L_SUL] = states.index("u")
+        for j, e in enumerate(terms):
+            c = int(e.options["term_code"])
+            if lay[kernel.L_SUL] < 0 and term_kernel.TF_UL in (c % 16, (c // 16) % 16, (c // 256) % 16):
+                raise ValueError(f"{self.name}: '{e.name}' needs a lagged command (spencer or +voltage_dependence)")
+            lay[kernel.L_TP + j] = names.index(e.params[0].name)
+            lay[kernel.L_TC + j] = c
 
     def constants(self, mass: float | None = None, *, c_acc: float = 1.0, n_max: int = 400) -> np.ndarray:
         """The float64 constants array the kernel reads (mass, envelope time, step control)."""

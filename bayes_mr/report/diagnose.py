@@ -305,6 +305,31 @@ def unexplained_text(out: dict) -> list[str]:
     return lines + [""]
 
 
+def terms_text(out: dict) -> list[str]:
+    """The report's "Terms outside the vocabulary" section (the term search, when it ran)."""
+    t = out.get("terms")
+    if not t:
+        return []
+    lines = ["## Terms outside the vocabulary", "",
+             f"Searched ({t['asked']}) by lasso on the library's output sensitivities over the first "
+             f"{fmt(100 * (1 - t['holdout']))} % of the record; each proposal refitted inside the model and kept only "
+             f"if its score passes the threshold, Δ ln Z > 0 and the error falls on the held-out last "
+             f"{fmt(100 * t['holdout'])} % (in ≥ 8 of 10 blocks).", "",
+             "| term | score | Δ ln Z | held-out MSE ratio | blocks better | kept |", "|---|---|---|---|---|---|"]
+    for r in t["proposed"]:
+        lines.append(f"| `{r['term']}` | {fmt(r.get('score'))} | {fmt(r.get('delta_log_evidence'))} | "
+                     f"{fmt(r.get('heldout_mse_ratio'))} | {r.get('heldout_blocks_better', '–')} | "
+                     f"{'yes' if r['kept'] else 'no'} |")
+    lines.append("")
+    if t["kept"]:
+        lines += [f"Kept: `{t['model']}` (whole record: MSE ratio {fmt(t['mse_ratio'])}, "
+                  f"Δ ln Z {fmt(t['delta_log_evidence'])} against `{out['extended']['model']}`)."]
+        lines += [f"- {s}" for s in t["sentences"]]
+    else:
+        lines.append("No term kept.")
+    return lines + [""]
+
+
 def _markdown(out: dict, figures: dict[str, Path]) -> str:
     rec = out["record"]
     lines = [f"# Diagnosis of `{rec['source']}`", "",
@@ -323,6 +348,7 @@ def _markdown(out: dict, figures: dict[str, Path]) -> str:
               f"{fmt(g['delta_log_evidence'])}; validation MSE ratio {fmt(g['validation_mse_ratio'])}",
               f"- decision threshold on the score: {fmt(out['threshold'])}; wall time {fmt(out.get('wall_s'))} s", ""]
     lines += unexplained_text(out)
+    lines += terms_text(out)
     if out.get("baselines"):
         lines += ["## Baseline chosen by evidence", "", "| model | ln Z (Laplace) | MSE |", "|---|---|---|"]
         for row in out["baselines"]:
