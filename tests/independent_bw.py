@@ -65,7 +65,7 @@ def table_3_2_record(noise: float = 0.01, seed: int = 0, duration: float | None 
     if not sol.success:
         raise RuntimeError(sol.message)
     x, xd, r = sol.y
-    acc = -(c * xd + k * x + k * r) / MASS  # absolute acceleration ẍ + ẍ_g + w... as the package's −f_r/m
+    acc = -(c * xd + k * x + k * r) / MASS  # −f_r/m = ẍ + ẍ_g + w, the package's acceleration channel
     channels = {"ground_acceleration": ag}
     sds = {"ground_acceleration": sd_in}
     for name, clean in (("displacement", x), ("acceleration", acc)):
