@@ -174,7 +174,7 @@ class Parameterisation:
         fixed: dict[str, float] | None = None,
     ) -> "Parameterisation":
         model = get_model(model)
-        fixed = dict(fixed or {})
+        fixed = model.canonical(fixed)  # a derived name (spencer's x0, with k1) fixes what it stands for
         template = model.theta(kind, fixed)
         names = model.param_names(kind)
         free = [i for i in model.free_index(kind) if names[i] not in fixed]

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -216,20 +216,24 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
     else:  # e.g. a UKF run chosen on another record that is unstable on this one: report, don't fail
         scores = {"mse": None, "force_errors": None, "force_nrmse": None, "rmse": None}
     info = dict(post.info, **_noise_info(lik, post, sim))
-    flat = post.draws.reshape(-1, post.draws.shape[-1])
+    # the free parameters and the model's derived ones (spencer's x0 = F_pre/k1), draw by draw
+    names, units, draws = lik.model.reported(lik.kind, names, units, post.draws, lik.par.full_theta(post.draws))
+    point = lik.model.reported(lik.kind, lik.par.names, (), post.point, lik.par.full_theta(post.point))[2]
+    flat = draws.reshape(-1, draws.shape[-1])
     summary = FitSummary(
         model=lik.model.name, engine=post.engine, kind=lik.kind,
         params=dict(zip(names, flat.mean(axis=0))),
         params_sd=dict(zip(names, flat.std(axis=0, ddof=post.params_sd_ddof))),
         log_evidence=post.log_evidence, mse=scores["mse"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], masked=int((~lik.valid).sum()), trained=post.trained,
-        diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, post.point)), rmse=scores["rmse"],
+        diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, point)), rmse=scores["rmse"],
         noise_model=info.pop("noise_model"),
-        extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed), **describe_interp(lik.inputs.interp, post.engine)},
+        extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
+               **describe_interp(lik.inputs.interp, post.engine)},
     )
     ll, ll_index = pointwise_log_likelihood(lik, post)
-    return make_inference_data(summary, post, names, units, record, log_likelihood=ll, ll_index=ll_index,
-                               predictive=predictive_draws(lik, post))
+    return make_inference_data(summary, replace(post, draws=draws, point=point), names, units, record,
+                               log_likelihood=ll, ll_index=ll_index, predictive=predictive_draws(lik, post))
 
 
 def _noise_info(lik: OutputError, post: Posterior, sim) -> dict:

@@ -71,7 +71,7 @@ def reference_rhs(model, kind, q, mass, t, s, x_in, v_in, volt, env):
         ds[j] = yd
         ds[j + 1] = -q["gamma"] * abs(xd - yd) * z * abs(z) ** (q["n"] - 1) - q["beta"] * (xd - yd) * abs(z) ** q["n"] + q["A"] * (xd - yd)
         ds[j + 2] = -q["eta"] * (us - volt)
-        f_d = c1 * yd + m_k * q["k1"] * (x - q["x0"])
+        f_d = c1 * yd + m_k * (q["k1"] * x - q["F_pre"])  # F_pre = k1·x0, the preload
         f_frame = q["c"] * xd + m_k * q["k"] * x if kind == "structure" else 0.0
     else:
         z = s[j]

@@ -25,6 +25,7 @@ import xarray as xr
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
 from .lsq import LSQResult, LSQSettings, fit_lsq
+from . import ukf
 from .ukf import TAUS, UKFSettings
 
 
@@ -163,20 +164,24 @@ class UKF:
         validation = validate_runs(training, likelihood.record if method == 1 else self.validate_on)
         sel = best_run(training, validation)
         run = training.sel(run=sel)
-        phi, cov = run["final_phi"].values, run["final_cov_phi"].values
+        # further passes from the chosen run without its prior's transient (UKFSettings.refine_passes)
+        ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
+                         run["final_cov_phi"].values, self.settings)
+        phi, cov = ref["phi"], ref["cov"]
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
         x = draws_phi
         if likelihood.noise == "sampled":
             x = np.hstack([draws_phi, np.tile(np.log(likelihood.noise_sd), (self.n_draws, 1))])
         log_evidence = float(run["log_evidence"])
-        point = run["final_mean"].values
+        point = likelihood.par.coords.to_theta(phi)
         info = {
             "evidence_route": "ukf_innovations", "method": method, "selected_run": int(sel),
             "selected_lhs": int(run["lhs"]), "selected_tau": float(run["tau"]),
             "validation_mse": float(validation["mse"].sel(run=sel)),
             "validated_on": str(validation.attrs.get("source", "")),
             "interrupted": int(training.attrs["interrupted"]), "training_wall_s": float(training.attrs["wall_s"]),
+            "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"],
         }
         return Posterior(
             engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,
@@ -185,7 +190,7 @@ class UKF:
             groups={"ukf_training": training, "ukf_validation": validation},
             attrs={"selected_run": int(sel), "method": method},
             trained=int(training.attrs["trained"]), diverged=int(training.attrs["diverged"]),
-            wall_s=float(training.attrs["wall_s"]),
+            wall_s=float(training.attrs["wall_s"]) + ref["wall_s"],
         )
 
 

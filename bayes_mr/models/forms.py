@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from . import kernel
 from .model import Form
-from .params import F_, F_V, F_X, ONE, PER_X, PER_X2, ParamSpec
+from .params import F_, F_V, F_X, ONE, PER_X, PER_X2, ParamSpec, Ratio
 
 C = ParamSpec("c", "N·s/m", "viscous damping (frame + damper)", 100.0, F_V, (1e-3, 2.0))
 K = ParamSpec("k", "N/m", "stiffness (frame + damper)", 2.0e4, F_X, (1e-4, 3.0))
@@ -99,7 +99,11 @@ SPENCER = Form(
         ParamSpec("c1a", "N·s/m", "low-velocity (series) damping c1 at 0 V", 2.83e4, F_V, (1e-3, 100.0)),
         ParamSpec("c1b", "N·s/(m·V)", "c1 per volt", 2.95e2, F_V, (1e-4, 10.0)),
         ParamSpec("k1", "N/m", "accumulator stiffness", 5.00e2, F_X, (1e-6, 1.0)),
-        ParamSpec("x0", "m", "accumulator initial displacement (k1·x0 = preload)", 0.143, (0, 1, 0, 0), (0.1, 1000.0)),
+        # the accumulator force k1 (x − x0) = k1 x − F_pre: a record determines the preload F_pre, not x0 —
+        # k1 → 0 with k1·x0 fixed barely changes the force, so (k1, x0) is a sloppy pair whose draws run
+        # along a hyperbola (Ma et al. 2004); F_pre is estimated and x0 = F_pre/k1 reported from the draws
+        ParamSpec("F_pre", "N", "accumulator preload k1·x0 (x0 = F_pre/k1 is reported)", 5.00e2 * 0.143, F_,
+                  (1e-4, 1.0)),
         ParamSpec("gamma", "1/m²", "Bouc–Wen γ", 3.63e6, PER_X2, (0.1, 1e4)),
         ParamSpec("beta", "1/m²", "Bouc–Wen β", 3.63e6, PER_X2, (0.1, 1e4)),
         ParamSpec("A", "-", "Bouc–Wen A (held fixed: one scale of α, A, β, γ is redundant)", 301.0, ONE, (10.0, 3000.0)),
@@ -109,6 +113,7 @@ SPENCER = Form(
     states=("y", "z", "u"),
     frame_in_form=False,
     fixed=("A",),
+    derived=(Ratio("x0", "m", "accumulator initial displacement F_pre/k1", "F_pre", "k1"),),
 )
 
 FORMS: dict[str, Form] = {f.name: f for f in (NORMALIZED_BOUC_WEN, DAHL, LUGRE, BOUC_WEN, SPENCER)}

@@ -188,7 +188,7 @@ def deriv(lay, cst, p, t, a, s, ds):
 
     if form == SPENCER:
         k1 = p[o + 7]
-        x0 = p[o + 8]
+        f_pre = p[o + 8]  # the preload k1·x0 (forms.SPENCER estimates it in place of x0)
         y = s[i]
         z = s[i + 1]
         us = s[i + 2]
@@ -199,7 +199,7 @@ def deriv(lay, cst, p, t, a, s, ds):
         zn = math.pow(abs(z), n)
         ds[i] = yd
         ds[i + 1] = -gam * abs(r) * _sgn(z) * zn - bet * r * zn + A * r
-        f_d = c1 * yd + m_k * k1 * (x - x0)
+        f_d = c1 * yd + m_k * (k1 * x - f_pre)
         jf = lay[L_PFRAME]
         if jf >= 0:
             f_frame = p[jf] * xd + m_k * p[jf + 1] * x

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import kernel, term_kernel
 from .effects import Effect
-from .params import F_V, F_X, Coordinates, ParamSpec, Scales
+from .params import F_V, F_X, Coordinates, ParamSpec, Ratio, Scales
 
 #: The kinds of test a model is bound to: a storey on a shake table, the damper alone, or a
 #: mass driven by a measured force (``m ẍ + f_r = p``).
@@ -78,6 +78,9 @@ class Form:
         ``spencer``, whose structure tests get a separate frame ``c``, ``k``).
     fixed : tuple of str
         Redundant parameters held at their value during estimation.
+    derived : tuple of Ratio
+        Reported parameters computed from estimated ones (``spencer``'s
+        ``x0 = F_pre/k1``); accepted as inputs with their denominator.
     """
 
     name: str
@@ -87,6 +90,7 @@ class Form:
     states: tuple[str, ...]
     frame_in_form: bool = True
     fixed: tuple[str, ...] = ()
+    derived: tuple[Ratio, ...] = ()
 
     def __add__(self, effect: Effect) -> Model:
         return Model(self) + effect
@@ -151,13 +155,76 @@ class Model:
     def free_specs(self, kind: str) -> tuple[ParamSpec, ...]:
         return tuple(s for s in self.param_specs(kind) if s.name not in self.form.fixed)
 
+    def canonical(self, values: dict[str, float] | None) -> dict[str, float]:
+        """``values`` (name → SI) with every derived name replaced by the estimated one it stands for.
+
+        ``x0`` of ``spencer`` given with ``k1`` becomes ``F_pre = k1·x0``; given
+        beside ``F_pre`` it must agree with it (a fit's ``point`` carries both).
+
+        Raises
+        ------
+        ValueError
+            A derived name without its denominator, or disagreeing with its numerator.
+        """
+        out = dict(values or {})
+        for d in self.form.derived:
+            if d.name not in out:
+                continue
+            value = float(out.pop(d.name))
+            if d.denominator not in out:
+                raise ValueError(f"{self.name}: '{d.name}' is {d.numerator}/{d.denominator}; give it with "
+                                 f"'{d.denominator}', or give '{d.numerator}' instead")
+            implied = value * float(out[d.denominator])
+            if d.numerator in out and not np.isclose(float(out[d.numerator]), implied, rtol=1e-6):
+                raise ValueError(f"{self.name}: {d.name} = {value} disagrees with {d.numerator}/{d.denominator} = "
+                                 f"{float(out[d.numerator]) / float(out[d.denominator])}")
+            out[d.numerator] = implied
+        return out
+
+    def derived_values(self, kind: str, theta: np.ndarray) -> dict[str, np.ndarray]:
+        """Derived parameters (name → array (...)) of full parameter vectors ``theta`` (..., P) [SI]."""
+        names = self.param_names(kind)
+        theta = np.asarray(theta, float)
+        return {d.name: theta[..., names.index(d.numerator)] / theta[..., names.index(d.denominator)]
+                for d in self.form.derived}
+
+    def reported(self, kind: str, names: tuple[str, ...], units: tuple[str, ...], free: np.ndarray,
+                 full: np.ndarray) -> tuple[tuple[str, ...], tuple[str, ...], np.ndarray]:
+        """The free parameters ``names`` and, where one of their inputs is free, the derived ones.
+
+        Parameters
+        ----------
+        names, units : tuple of str
+            The free parameters and their units.
+        free : ndarray, shape (..., p)
+            Their values [SI] (draws or a point).
+        full : ndarray, shape (..., P)
+            The same as full parameter vectors [SI].
+
+        Returns
+        -------
+        names, units : tuple of str
+            With the derived parameters appended.
+        values : ndarray, shape (..., p + d)
+            ``free`` with the derived values appended, computed from each
+            row, so their mean, SD and intervals are those of the draws.
+        """
+        extra = [d for d in self.form.derived if {d.numerator, d.denominator} & set(names)]
+        free = np.asarray(free, float)
+        if not extra:
+            return tuple(names), tuple(units), free
+        values = self.derived_values(kind, full)
+        return (tuple(names) + tuple(d.name for d in extra), tuple(units) + tuple(d.unit for d in extra),
+                np.concatenate([free] + [np.asarray(values[d.name])[..., None] for d in extra], axis=-1))
+
     def theta(self, kind: str, values: dict[str, float] | None = None, *, defaults: bool = True) -> np.ndarray:
         """Full parameter vector (SI) from ``values``; unknown names are an error.
 
         Missing names take the spec default when ``defaults`` is True, else
-        raise listing what is missing.
+        raise listing what is missing. Derived names are accepted as
+        :meth:`canonical` reads them.
         """
-        values = dict(values or {})
+        values = self.canonical(values)
         names = self.param_names(kind)
         unknown = [n for n in values if n not in names]
         if unknown:

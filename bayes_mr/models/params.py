@@ -121,6 +121,32 @@ class ParamSpec:
 
 
 @dataclass(frozen=True)
+class Ratio:
+    """A reported parameter that is the ratio of two estimated ones, ``name = numerator / denominator``.
+
+    A model whose data determine a product better than its factors carries
+    the product as the estimated parameter and reports the factor it
+    replaced as this ratio, with its spread taken from the draws (Spencer's
+    accumulator: the preload ``F_pre = k1·x0`` is estimated, ``x0 = F_pre/k1``
+    reported). The ratio is also accepted as an input name wherever the
+    denominator is given with it (:meth:`~bayes_mr.models.model.Model.canonical`).
+
+    Attributes
+    ----------
+    name, unit, description : str
+        The reported parameter (its contract name, SI unit, one line).
+    numerator, denominator : str
+        Names of the estimated parameters it is computed from.
+    """
+
+    name: str
+    unit: str
+    description: str
+    numerator: str
+    denominator: str
+
+
+@dataclass(frozen=True)
 class Coordinates:
     """Map between natural parameters θ (SI) and estimation coordinates φ.
 
