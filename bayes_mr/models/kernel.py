@@ -53,14 +53,21 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
-LAYOUT_SIZE = L_OBS + N_OBS
+# issue-15 effects, after the measured-channel block so the older slots keep their indices
+L_CSAT = L_OBS + N_OBS  # command_saturation: u_s
+L_FD = L_CSAT + 1  # field_dynamics: tau_c
+L_SC = L_FD + 1  # state index of the coil current (field_dynamics)
+L_ST = L_SC + 1  # shear_thinning: c_p, m_hb, v_p
+L_SF = L_ST + 1  # stribeck_friction: F_st, F_c, v_s
+LAYOUT_SIZE = L_SF + 1
 
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
 K_TENV = 1  # amplitude-envelope decay time [s]
 K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
 K_NMAX = 3  # most sub-steps per sample
-CONST_SIZE = 4
+K_SMOOTH = 4  # stribeck_friction: width of the smoothed sgn ẋ relative to v_s
+CONST_SIZE = 5
 
 
 @hot(inline="always")
@@ -70,6 +77,47 @@ def _sgn(v):
     if v < 0.0:
         return -1.0
     return 0.0
+
+
+@hot(inline="always")
+def _saturate(lay, p, u):
+    """The command as the yield force sees it: u_s·tanh(u/u_s) with command_saturation, else u."""
+    if lay[L_CSAT] < 0:
+        return u
+    us = p[lay[L_CSAT]]
+    return us * math.tanh(u / us)
+
+
+@hot(inline="always")
+def _fluid_friction(lay, cst, p, xd):
+    """Velocity-only damper forces [N]: shear_thinning and stribeck_friction (0 when off)."""
+    f = 0.0
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        cp, mh, vp = p[j], p[j + 1], p[j + 2]
+        # Herschel–Bulkley power law |ẋ|^m above v_p, slope c_p at rest (regularised)
+        f += cp * vp * _sgn(xd) * (math.pow(1.0 + abs(xd) / vp, mh) - 1.0) / mh
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        vs = p[j + 2]
+        r = xd / vs
+        rr = r * r
+        stri = p[j] * math.exp(-rr) if rr < 700.0 else 0.0
+        f += (p[j + 1] + stri) * math.tanh(r / cst[K_SMOOTH])
+    return f
+
+
+@hot(inline="always")
+def _fluid_slope(lay, cst, p, vmax):
+    """Upper bound of d(_fluid_friction)/dẋ [N·s/m] for |ẋ| ≤ vmax (the rate of structure tests)."""
+    slope = 0.0
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        slope += p[j] * max(1.0, math.pow(1.0 + vmax / p[j + 2], p[j + 1] - 1.0))
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        slope += (abs(p[j]) + abs(p[j + 1])) / (cst[K_SMOOTH] * p[j + 2])
+    return slope
 
 
 @hot(inline="always")
@@ -126,6 +174,10 @@ def deriv(lay, cst, p, t, a, s, ds):
         x = a[0]
         xd = a[1]
     v = a[2]
+    if lay[L_FD] >= 0:
+        # field_dynamics: the field lags follow the coil current, which advance() updates exactly
+        v = s[lay[L_SC]]
+        ds[lay[L_SC]] = 0.0
     o = lay[L_PFORM]
     i = lay[L_SFORM]
 
@@ -142,7 +194,7 @@ def deriv(lay, cst, p, t, a, s, ds):
         iu = lay[L_SU]
         u = s[iu]
         ds[iu] = p[j + 2] * (v - u)
-        m_s *= 1.0 + p[j] * u
+        m_s *= 1.0 + p[j] * _saturate(lay, p, u)
     if lay[L_SA] >= 0:
         j = lay[L_SA]
         ie = lay[L_SE]
@@ -168,6 +220,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         z = s[i + 1]
         us = s[i + 2]
         alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, us, m_s)
+        if lay[L_CSAT] >= 0:
+            alpha = (p[o] + p[o + 1] * _saturate(lay, p, us)) * m_s
         ds[i + 2] = eta * (v - us)
         yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
         r = xd - yd
@@ -208,6 +262,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         f_d += p[lay[L_F0]]
     if lay[L_VD] >= 0:
         f_d += p[lay[L_VD] + 1] * u * xd
+    if lay[L_ST] >= 0 or lay[L_SF] >= 0:
+        f_d += _fluid_friction(lay, cst, p, xd)
     f_r = f_frame + f_d
     if lay[L_K3] >= 0:
         f_r += p[lay[L_K3]] * x * x * x
@@ -326,6 +382,8 @@ def rate(lay, cst, p, t, s, vmax):
     if lay[L_VD] >= 0:
         lam += abs(p[lay[L_VD] + 2])
         damp += abs(p[lay[L_VD] + 1]) * u
+    if lay[L_ST] >= 0 or lay[L_SF] >= 0:
+        damp += _fluid_slope(lay, cst, p, vmax)
     stiff *= m_k
     if lay[L_KIND] != DEVICE:
         m = mass(lay, cst, p)
@@ -345,6 +403,21 @@ def substeps(lay, cst, lam, h):
     if n > nmax:
         n = nmax
     return n
+
+
+@hot(inline="always")
+def _coil_step(lay, p, s, v0, v1, hs):
+    """Coil current over a sub-step, exact for a command linear from v0 to v1 (stable for any τ_c).
+
+    i(hs) = v1 − τ·v̇ + (i0 − v0 + τ·v̇)·e^{−hs/τ}, v̇ = (v1 − v0)/hs. The field
+    lags read the current held over the sub-step (``deriv`` sets its rate to 0),
+    as the amplitude envelope is: a lag of half a sub-step at most.
+    """
+    ic = lay[L_SC]
+    tau = p[lay[L_FD]]
+    vd = (v1 - v0) / hs
+    e = math.exp(-hs / tau) if hs < 700.0 * tau else 0.0
+    s[ic] = v1 - tau * vd + (s[ic] - v0 + tau * vd) * e
 
 
 @hot
@@ -385,6 +458,8 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
         deriv(lay, cst, p, tj + hs, am, tmp, k4)
         for q in range(ns):
             s[q] += hs / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+        if lay[L_FD] >= 0:
+            _coil_step(lay, p, s, a0[2] + (j / n_sub) * (a1[2] - a0[2]), am[2], hs)
         if lay[L_SA] >= 0:
             # amplitude envelope: follows peaks at once, decays with time constant T_env
             ie = lay[L_SE]
