@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
+from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_SC, L_SF, L_ST, _coil_step, _fluid_friction,
+                             _fluid_slope, _saturate, _sgn)
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4
@@ -53,12 +55,9 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
-# issue-15 effects, after the measured-channel block so the older slots keep their indices
-L_CSAT = L_OBS + N_OBS  # command_saturation: u_s
-L_FD = L_CSAT + 1  # field_dynamics: tau_c
-L_SC = L_FD + 1  # state index of the coil current (field_dynamics)
-L_ST = L_SC + 1  # shear_thinning: c_p, m_hb, v_p
-L_SF = L_ST + 1  # stribeck_friction: F_st, F_c, v_s
+# issue-15 effects (slots L_CSAT..L_SF, constant K_SMOOTH) live in kernel_effects, after the
+# measured-channel block so the older slots keep their indices
+assert L_CSAT == L_OBS + N_OBS, "kernel_effects' slots must follow the measured-channel block"
 LAYOUT_SIZE = L_SF + 1
 
 # --- constants (float64 array) ----------------------------------------------
@@ -66,58 +65,8 @@ K_MASS = 0  # storey mass [kg] (structure tests)
 K_TENV = 1  # amplitude-envelope decay time [s]
 K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
 K_NMAX = 3  # most sub-steps per sample
-K_SMOOTH = 4  # stribeck_friction: width of the smoothed sgn ẋ relative to v_s
+assert K_SMOOTH == 4, "kernel_effects' constant must follow the step-control constants"
 CONST_SIZE = 5
-
-
-@hot(inline="always")
-def _sgn(v):
-    if v > 0.0:
-        return 1.0
-    if v < 0.0:
-        return -1.0
-    return 0.0
-
-
-@hot(inline="always")
-def _saturate(lay, p, u):
-    """The command as the yield force sees it: u_s·tanh(u/u_s) with command_saturation, else u."""
-    if lay[L_CSAT] < 0:
-        return u
-    us = p[lay[L_CSAT]]
-    return us * math.tanh(u / us)
-
-
-@hot(inline="always")
-def _fluid_friction(lay, cst, p, xd):
-    """Velocity-only damper forces [N]: shear_thinning and stribeck_friction (0 when off)."""
-    f = 0.0
-    if lay[L_ST] >= 0:
-        j = lay[L_ST]
-        cp, mh, vp = p[j], p[j + 1], p[j + 2]
-        # Herschel–Bulkley power law |ẋ|^m above v_p, slope c_p at rest (regularised)
-        f += cp * vp * _sgn(xd) * (math.pow(1.0 + abs(xd) / vp, mh) - 1.0) / mh
-    if lay[L_SF] >= 0:
-        j = lay[L_SF]
-        vs = p[j + 2]
-        r = xd / vs
-        rr = r * r
-        stri = p[j] * math.exp(-rr) if rr < 700.0 else 0.0
-        f += (p[j + 1] + stri) * math.tanh(r / cst[K_SMOOTH])
-    return f
-
-
-@hot(inline="always")
-def _fluid_slope(lay, cst, p, vmax):
-    """Upper bound of d(_fluid_friction)/dẋ [N·s/m] for |ẋ| ≤ vmax (the rate of structure tests)."""
-    slope = 0.0
-    if lay[L_ST] >= 0:
-        j = lay[L_ST]
-        slope += p[j] * max(1.0, math.pow(1.0 + vmax / p[j + 2], p[j + 1] - 1.0))
-    if lay[L_SF] >= 0:
-        j = lay[L_SF]
-        slope += (abs(p[j]) + abs(p[j + 1])) / (cst[K_SMOOTH] * p[j + 2])
-    return slope
 
 
 @hot(inline="always")
@@ -403,21 +352,6 @@ def substeps(lay, cst, lam, h):
     if n > nmax:
         n = nmax
     return n
-
-
-@hot(inline="always")
-def _coil_step(lay, p, s, v0, v1, hs):
-    """Coil current over a sub-step, exact for a command linear from v0 to v1 (stable for any τ_c).
-
-    i(hs) = v1 − τ·v̇ + (i0 − v0 + τ·v̇)·e^{−hs/τ}, v̇ = (v1 − v0)/hs. The field
-    lags read the current held over the sub-step (``deriv`` sets its rate to 0),
-    as the amplitude envelope is: a lag of half a sub-step at most.
-    """
-    ic = lay[L_SC]
-    tau = p[lay[L_FD]]
-    vd = (v1 - v0) / hs
-    e = math.exp(-hs / tau) if hs < 700.0 * tau else 0.0
-    s[ic] = v1 - tau * vd + (s[ic] - v0 + tau * vd) * e
 
 
 @hot
