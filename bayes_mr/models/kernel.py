@@ -124,8 +124,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         xd = a[1]
     v = a[2]
     if lay[L_FD] >= 0:
-        # field_dynamics: the field lags follow the coil current, which advance() updates exactly
-        v = s[lay[L_SC]]
+        # field_dynamics: the field lags follow the coil current i = v + d; advance() updates d exactly
+        v += s[lay[L_SC]]
         ds[lay[L_SC]] = 0.0
     o = lay[L_PFORM]
     i = lay[L_SFORM]

@@ -75,14 +75,15 @@ def _fluid_slope(lay, cst, p, vmax):
 
 @hot(inline="always")
 def _coil_step(lay, p, s, v0, v1, hs):
-    """Coil current over a sub-step, exact for a command linear from v0 to v1 (stable for any τ_c).
+    """Advance the coil's lag d = i − v over a sub-step, exact for a command linear from v0 to v1.
 
-    i(hs) = v1 − τ·v̇ + (i0 − v0 + τ·v̇)·e^{−hs/τ}, v̇ = (v1 − v0)/hs. The field
-    lags read the current held over the sub-step (``deriv`` sets its rate to 0),
-    as the amplitude envelope is: a lag of half a sub-step at most.
+    With i̇ = (v − i)/τ_c, d obeys ḋ = −d/τ_c − v̇, so d(hs) = −τ·v̇ + (d0 + τ·v̇)·e^{−hs/τ},
+    v̇ = (v1 − v0)/hs: stable for any τ_c, and d → 0 (the one-lag model) as τ_c → 0.
+    The field lags read i = v(t) + d with d held over the sub-step (``deriv`` sets its
+    rate to 0), as the amplitude envelope is updated between sub-steps.
     """
     ic = lay[L_SC]
     tau = p[lay[L_FD]]
     vd = (v1 - v0) / hs
     e = math.exp(-hs / tau) if hs < 700.0 * tau else 0.0
-    s[ic] = v1 - tau * vd + (s[ic] - v0 + tau * vd) * e
+    s[ic] = -tau * vd + (s[ic] + tau * vd) * e
