@@ -181,7 +181,7 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
 OFF_END = {"k3": ("lower", 1e-3), "c_s": ("upper", 1e3), "delay": ("lower", 1e-3),
            "a_v": ("lower", 1e-3), "c_v": ("lower", 1e-3),
            "u_s": ("upper", 1e3), "tau_c": ("lower", 1e-3), "c_p": ("lower", 1e-3),
-           "F_st": ("lower", 1e-3), "F_c": ("lower", 1e-3), "m_e": ("lower", 1e-3)}
+           "F_st": ("lower", 1e-3), "m_e": ("lower", 1e-3)}
 
 
 #: Share of the record each regime of ``small_amplitude_regime`` must hold at least.
@@ -237,7 +237,7 @@ def effect_ranges(model: Model, record: xr.Dataset, scales=None) -> dict[str, tu
 def _null(name: str, lo: float, hi: float, default: float) -> float:
     """The value that switches an effect's parameter off (or nearest inside its box)."""
     off = {"f0": 0.0, "drift": 0.0, "asym": 0.0, "r_s": 1.0, "c_s": hi, "delay": lo, "k3": lo,
-           "a_v": lo, "c_v": lo, "u_s": hi, "tau_c": lo, "c_p": lo, "F_st": lo, "F_c": lo, "m_e": lo}
+           "a_v": lo, "c_v": lo, "u_s": hi, "tau_c": lo, "c_p": lo, "F_st": lo, "m_e": lo}
     if name in off:
         return float(np.clip(off[name], lo, hi))
     if name == "x_s":

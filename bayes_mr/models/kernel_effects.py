@@ -18,7 +18,7 @@ L_CSAT = 20  # command_saturation: u_s
 L_FD = 21  # field_dynamics: tau_c
 L_SC = 22  # state index of the coil current (field_dynamics)
 L_ST = 23  # shear_thinning: c_p, m_hb, v_p
-L_SF = 24  # stribeck_friction: F_st, F_c, v_s
+L_SF = 24  # stribeck_friction: F_st, v_s
 # --- constants (float64 array; see kernel.K_*) -----------------------------------
 K_SMOOTH = 4  # stribeck_friction: width of the smoothed sgn ẋ relative to v_s
 
@@ -52,11 +52,10 @@ def _fluid_friction(lay, cst, p, xd):
         f += cp * vp * _sgn(xd) * (math.pow(1.0 + abs(xd) / vp, mh) - 1.0) / mh
     if lay[L_SF] >= 0:
         j = lay[L_SF]
-        vs = p[j + 2]
-        r = xd / vs
+        r = xd / p[j + 1]
         rr = r * r
-        stri = p[j] * math.exp(-rr) if rr < 700.0 else 0.0
-        f += (p[j + 1] + stri) * math.tanh(r / cst[K_SMOOTH])
+        if rr < 700.0:
+            f += p[j] * math.exp(-rr) * math.tanh(r / cst[K_SMOOTH])
     return f
 
 
@@ -69,7 +68,7 @@ def _fluid_slope(lay, cst, p, vmax):
         slope += p[j] * max(1.0, math.pow(1.0 + vmax / p[j + 2], p[j + 1] - 1.0))
     if lay[L_SF] >= 0:
         j = lay[L_SF]
-        slope += (abs(p[j]) + abs(p[j + 1])) / (cst[K_SMOOTH] * p[j + 2])
+        slope += abs(p[j]) / (cst[K_SMOOTH] * p[j + 1])
     return slope
 
 

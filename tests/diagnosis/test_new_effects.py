@@ -25,14 +25,14 @@ VD = {"a_v": 1.0, "c_v": 50.0, "eta": 50.0}
 #: Two magnitudes of each effect: dahl storey (F_d = 25 N, c = 100 N·s/m, ~0.08 m/s peak velocity).
 STRUCTURE_MAGNITUDES = {
     "shear_thinning": [{"c_p": 150.0, "m_hb": 0.5, "v_p": 0.01}, {"c_p": 400.0, "m_hb": 0.5, "v_p": 0.01}],
-    "stribeck_friction": [{"F_st": 2.0, "F_c": 1.0, "v_s": 0.005}, {"F_st": 5.0, "F_c": 1.0, "v_s": 0.005}],
+    "stribeck_friction": [{"F_st": 2.0, "v_s": 0.005}, {"F_st": 5.0, "v_s": 0.005}],
     "command_saturation": [1.5, 0.7],  # V, against commands up to 2.5 V
     "field_dynamics": [0.01, 0.03],  # s, before the 20 ms field lag
 }
 #: ... and a dahl damper on a device test (~0.15 m/s peak velocity, ~110 N peak force).
 DEVICE_MAGNITUDES = {
     "shear_thinning": [{"c_p": 150.0, "m_hb": 0.5, "v_p": 0.01}, {"c_p": 400.0, "m_hb": 0.5, "v_p": 0.01}],
-    "stribeck_friction": [{"F_st": 5.0, "F_c": 2.0, "v_s": 0.01}, {"F_st": 12.0, "F_c": 2.0, "v_s": 0.01}],
+    "stribeck_friction": [{"F_st": 5.0, "v_s": 0.01}, {"F_st": 12.0, "v_s": 0.01}],
     "command_saturation": [1.5, 0.7],
     "field_dynamics": [0.01, 0.03],
     "inertia": [1.0, 3.0],  # kg
@@ -95,7 +95,7 @@ def _with(base: str, effect: str, kind: str, values: dict, inputs: Inputs):
 @pytest.mark.parametrize("kind", ["device", "structure"])
 @pytest.mark.parametrize("effect,off", [
     ("command_saturation", {"u_s": 1e6}), ("field_dynamics", {"tau_c": 1e-9}),
-    ("shear_thinning", {"c_p": 1e-9}), ("stribeck_friction", {"F_st": 1e-9, "F_c": 1e-9}),
+    ("shear_thinning", {"c_p": 1e-9}), ("stribeck_friction", {"F_st": 1e-9}),
 ])
 def test_an_effect_switched_off_gives_the_base_model_back(kind, effect, off):
     """Every new effect nests its base: at its off value the response is the base model's."""
@@ -157,9 +157,9 @@ def test_shear_thinning_and_stribeck_follow_their_equations():
         y0, y1 = _with("dahl", "shear_thinning", "device", p, inputs)
         hb = p["c_p"] * p["v_p"] * np.sign(v) * ((1 + abs(v) / p["v_p"]) ** p["m_hb"] - 1) / p["m_hb"]
         assert y1[-1] - y0[-1] == pytest.approx(hb, rel=1e-9)
-        p = {"F_st": 8.0, "F_c": 3.0, "v_s": 0.005}
+        p = {"F_st": 8.0, "v_s": 0.005}
         y0, y1 = _with("dahl", "stribeck_friction", "device", p, inputs)
-        sf = (p["F_c"] + p["F_st"] * np.exp(-(v / p["v_s"]) ** 2)) * np.tanh(v / (0.1 * p["v_s"]))
+        sf = p["F_st"] * np.exp(-(v / p["v_s"]) ** 2) * np.tanh(v / (0.1 * p["v_s"]))
         assert y1[-1] - y0[-1] == pytest.approx(sf, rel=1e-9)
 
 
