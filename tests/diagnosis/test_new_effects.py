@@ -25,14 +25,14 @@ VD = {"a_v": 1.0, "c_v": 50.0, "eta": 50.0}
 #: Two magnitudes of each effect: dahl storey (F_d = 25 N, c = 100 N·s/m, ~0.08 m/s peak velocity).
 STRUCTURE_MAGNITUDES = {
     "shear_thinning": [{"c_p": 150.0, "m_hb": 0.5, "v_p": 0.01}, {"c_p": 400.0, "m_hb": 0.5, "v_p": 0.01}],
-    "stribeck_friction": [{"F_st": 2.0, "v_s": 0.005}, {"F_st": 5.0, "v_s": 0.005}],
+    "stribeck_friction": [{"F_st": 2.0, "v_s": 0.008}, {"F_st": 5.0, "v_s": 0.008}],
     "command_saturation": [1.5, 0.7],  # V, against commands up to 2.5 V
     "field_dynamics": [0.01, 0.03],  # s, before the 20 ms field lag
 }
 #: ... and a dahl damper on a device test (~0.15 m/s peak velocity, ~110 N peak force).
 DEVICE_MAGNITUDES = {
     "shear_thinning": [{"c_p": 150.0, "m_hb": 0.5, "v_p": 0.01}, {"c_p": 400.0, "m_hb": 0.5, "v_p": 0.01}],
-    "stribeck_friction": [{"F_st": 5.0, "v_s": 0.01}, {"F_st": 12.0, "v_s": 0.01}],
+    "stribeck_friction": [{"F_st": 5.0, "v_s": 0.015}, {"F_st": 12.0, "v_s": 0.015}],
     "command_saturation": [1.5, 0.7],
     "field_dynamics": [0.01, 0.03],
     "inertia": [1.0, 3.0],  # kg
