@@ -95,6 +95,23 @@ class Inputs:
     def time(self) -> np.ndarray:
         return np.arange(self.n) * self.dt
 
+    @cached_property
+    def acceleration(self) -> np.ndarray:
+        """Imposed acceleration ẍ [m/s²] of a device test (what ``inertia`` multiplies).
+
+        The Savitzky–Golay smoothing differentiator of the imposed velocity
+        (:func:`bayes_mr.data.derive.smooth_velocity`, window for the record's
+        bandwidth) — the velocity being itself the same derivative of the
+        imposed displacement when the record had none — so noise on the
+        measured motion is not amplified by a raw second difference.
+        Computed once per input.
+        """
+        from .data.derive import smooth_velocity
+
+        if self.kind != "device":
+            raise ValueError(f"the imposed acceleration is a device-test input, not a {self.kind} test's")
+        return smooth_velocity(self.rows[:, 1], self.dt)
+
     @classmethod
     def from_record(cls, record: xr.Dataset, interp: str | None = None) -> "Inputs":
         """Inputs of a record in the package schema.
@@ -249,6 +266,10 @@ def simulate(
     # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
     failed = np.where(failed >= 0, (failed + S - 1) // S, -1)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}
+    if model.effect("inertia"):
+        # the load cell also feels the moving mass m_e·ẍ; a sensor delay (below) lags it with the rest
+        j_mass = model.param_names(kind).index("m_e")
+        outputs["force"] = outputs["force"] + P[:, j_mass, None] * inputs.acceleration[None, :]
     channel = model.delay_channel(kind)
     if channel is not None:
         j_delay = model.param_names(kind).index("delay")

@@ -49,6 +49,7 @@ from scipy.stats import qmc
 from ..executor import Outcome, run_jobs, share
 from ..likelihood import OutputError
 from ..models import EFFECTS, Effect, Model
+from ..models.effects import DEVICE_ONLY, ON_COMMAND
 from ..models.model import _BUILT_IN
 from .fits import Fit, refit
 from .inflation import design_effect
@@ -64,7 +65,9 @@ from .residuals import envelope, varying_voltage
 #: effect hidden at two magnitudes. See ``tests/test_diagnose.py`` and the
 #: report of the calibration run for family sizes and rates. The value lies
 #: above every clean record's best score with a margin, and is "very strong"
-#: evidence on the Kass–Raftery scale (ln B > 5).
+#: evidence on the Kass–Raftery scale (ln B > 5). Rechecked with the issue-15 effects (10 clean dahl,
+#: normalized-Bouc–Wen and dahl+voltage_dependence records, structure and device): best clean score 7.0
+#: (stribeck_friction on a structure record) — all none, but with a margin of 1 only.
 THRESHOLD = 8.0
 
 #: Grid points of a one-parameter effect; Latin-hypercube points of a larger one.
@@ -145,8 +148,11 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
     Leaves out effects the model has or its form contains (``spencer``:
     voltage dependence, low-velocity roll-off), ``voltage_dependence`` without
     a varying voltage, ``small_amplitude_regime`` when the amplitude hardly
-    varies (:func:`regime_range`), and gives ``sensor_delay`` once per measured channel
-    (structure test: displacement and acceleration can each lag).
+    varies (:func:`regime_range`), the command-path effects (``command_saturation``,
+    ``field_dynamics``) on a model without a command path (they come in after
+    ``voltage_dependence`` is named), device-only effects (``inertia``) on other
+    tests, and gives ``sensor_delay`` once per measured channel (structure test:
+    displacement and acceleration can each lag).
     """
     kind = record.attrs["kind"]
     have = {e.name for e in model.effects} | set(_BUILT_IN.get(model.form.name, ()))
@@ -155,6 +161,8 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
         if name in have:
             continue
         if effect.needs_voltage and not varying_voltage(record):
+            continue
+        if (name in ON_COMMAND and not model.commanded) or (name in DEVICE_ONLY and kind != "device"):
             continue
         if name == "small_amplitude_regime" and regime_range(record, effect.options["t_env"]) is None:
             continue
@@ -173,7 +181,9 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
 #: extension that cannot be switched off would not nest its base model).
 #: The prior is log-uniform over the widened range; its Occam cost is in the score.
 OFF_END = {"k3": ("lower", 1e-3), "c_s": ("upper", 1e3), "delay": ("lower", 1e-3),
-           "a_v": ("lower", 1e-3), "c_v": ("lower", 1e-3)}
+           "a_v": ("lower", 1e-3), "c_v": ("lower", 1e-3),
+           "u_s": ("upper", 1e3), "tau_c": ("lower", 1e-3), "c_p": ("lower", 1e-3),
+           "F_st": ("lower", 1e-3), "m_e": ("lower", 1e-3)}
 
 
 #: Share of the record each regime of ``small_amplitude_regime`` must hold at least.
@@ -229,7 +239,7 @@ def effect_ranges(model: Model, record: xr.Dataset, scales=None) -> dict[str, tu
 def _null(name: str, lo: float, hi: float, default: float) -> float:
     """The value that switches an effect's parameter off (or nearest inside its box)."""
     off = {"f0": 0.0, "drift": 0.0, "asym": 0.0, "r_s": 1.0, "c_s": hi, "delay": lo, "k3": lo,
-           "a_v": lo, "c_v": lo}
+           "a_v": lo, "c_v": lo, "u_s": hi, "tau_c": lo, "c_p": lo, "F_st": lo, "m_e": lo}
     if name in off:
         return float(np.clip(off[name], lo, hi))
     if name == "x_s":

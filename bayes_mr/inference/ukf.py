@@ -145,6 +145,11 @@ def make_problem(lik: OutputError, settings: UKFSettings = UKFSettings()) -> Pro
             "sensor_delay delays a measured channel after the dynamics; the UKF engine filters states "
             "sample by sample and cannot estimate it — use --engine lsq or mcmc"
         )
+    if model.effect("inertia"):
+        raise ValueError(
+            "inertia adds m_e·ẍ to the simulated force after the dynamics (ẍ derived from the whole imposed "
+            "motion); the UKF engine filters sample by sample and cannot estimate it — use --engine lsq or mcmc"
+        )
     par = lik.par
     coords, template, free = par.coords, par.template, par.free_idx
     R = np.diag(np.asarray(lik.noise_sd, float) ** 2)

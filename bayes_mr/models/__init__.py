@@ -3,14 +3,19 @@
 from .catalog import get_model
 from .effects import (
     ASYMMETRY,
+    COMMAND_SATURATION,
     CUBIC_STIFFNESS,
     EFFECTS,
+    FIELD_DYNAMICS,
     FORCE_OFFSET,
+    INERTIA,
     LOW_VELOCITY_ROLLOFF,
     NONE,
     SENSOR_DELAY,
+    SHEAR_THINNING,
     SMALL_AMPLITUDE_REGIME,
     STIFFNESS_DRIFT,
+    STRIBECK_FRICTION,
     VOLTAGE_DEPENDENCE,
     Effect,
 )
@@ -19,8 +24,8 @@ from .model import KINDS, Form, Model
 from .params import Coordinates, ParamSpec, Scales
 
 __all__ = [
-    "ASYMMETRY", "BOUC_WEN", "CUBIC_STIFFNESS", "Coordinates", "DAHL", "EFFECTS", "Effect",
-    "FORCE_OFFSET", "FORMS", "Form", "KINDS", "LOW_VELOCITY_ROLLOFF", "LUGRE", "Model", "NONE",
-    "NORMALIZED_BOUC_WEN", "ParamSpec", "SENSOR_DELAY", "SMALL_AMPLITUDE_REGIME", "SPENCER",
-    "STIFFNESS_DRIFT", "Scales", "VOLTAGE_DEPENDENCE", "get_model",
+    "ASYMMETRY", "BOUC_WEN", "COMMAND_SATURATION", "CUBIC_STIFFNESS", "Coordinates", "DAHL", "EFFECTS", "Effect",
+    "FIELD_DYNAMICS", "FORCE_OFFSET", "FORMS", "Form", "INERTIA", "KINDS", "LOW_VELOCITY_ROLLOFF", "LUGRE", "Model",
+    "NONE", "NORMALIZED_BOUC_WEN", "ParamSpec", "SENSOR_DELAY", "SHEAR_THINNING", "SMALL_AMPLITUDE_REGIME", "SPENCER",
+    "STIFFNESS_DRIFT", "STRIBECK_FRICTION", "Scales", "VOLTAGE_DEPENDENCE", "get_model",
 ]

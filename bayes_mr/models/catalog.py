@@ -1,7 +1,7 @@
 """Model names: ``FORM[+EFFECT...]`` → :class:`~bayes_mr.models.model.Model`.
 
 The names are those of ``docs/CONTRACT.md`` (Models, Effects): the five forms
-of :data:`bayes_mr.models.forms.FORMS` and the eight effects of
+of :data:`bayes_mr.models.forms.FORMS` and the effects of
 :data:`bayes_mr.models.effects.EFFECTS`.
 """
 

@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
+from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_SC, L_SF, L_ST, _coil_step, _fluid_friction,
+                             _fluid_slope, _saturate, _sgn)
 from .term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
@@ -54,8 +56,11 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
+# issue-15 effects (slots L_CSAT..L_SF, constant K_SMOOTH) live in kernel_effects, after the
+# measured-channel block so the older slots keep their indices
+assert L_CSAT == L_OBS + N_OBS, "kernel_effects' slots must follow the measured-channel block"
 # library terms (bayes_mr.models.terms): up to N_TERMS terms θ_j·b_j, b_j chosen by a code
-L_TP = L_OBS + N_OBS  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
+L_TP = L_SF + 1  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
 N_TERMS = 3
 L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
 L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
@@ -66,16 +71,8 @@ K_MASS = 0  # storey mass [kg] (structure tests)
 K_TENV = 1  # amplitude-envelope decay time [s]
 K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
 K_NMAX = 3  # most sub-steps per sample
-CONST_SIZE = 4
-
-
-@hot(inline="always")
-def _sgn(v):
-    if v > 0.0:
-        return 1.0
-    if v < 0.0:
-        return -1.0
-    return 0.0
+assert K_SMOOTH == 4, "kernel_effects' constant must follow the step-control constants"
+CONST_SIZE = 5
 
 
 @hot(inline="always")
@@ -151,6 +148,10 @@ def deriv(lay, cst, p, t, a, s, ds):
         x = a[0]
         xd = a[1]
     v = a[2]
+    if lay[L_FD] >= 0:
+        # field_dynamics: the field lags follow the coil current i = v + d; advance() updates d exactly
+        v += s[lay[L_SC]]
+        ds[lay[L_SC]] = 0.0
     o = lay[L_PFORM]
     i = lay[L_SFORM]
 
@@ -167,7 +168,7 @@ def deriv(lay, cst, p, t, a, s, ds):
         iu = lay[L_SU]
         u = s[iu]
         ds[iu] = p[j + 2] * (v - u)
-        m_s *= 1.0 + p[j] * u
+        m_s *= 1.0 + p[j] * _saturate(lay, p, u)
     if lay[L_SA] >= 0:
         j = lay[L_SA]
         ie = lay[L_SE]
@@ -193,6 +194,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         z = s[i + 1]
         us = s[i + 2]
         alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, us, m_s)
+        if lay[L_CSAT] >= 0:
+            alpha = (p[o] + p[o + 1] * _saturate(lay, p, us)) * m_s
         ds[i + 2] = eta * (v - us)
         yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
         r = xd - yd
@@ -235,6 +238,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         f_d += p[lay[L_F0]]
     if lay[L_VD] >= 0:
         f_d += p[lay[L_VD] + 1] * u * xd
+    if lay[L_ST] >= 0 or lay[L_SF] >= 0:
+        f_d += _fluid_friction(lay, cst, p, xd)
     f_r = f_frame + f_d
     if lay[L_K3] >= 0:
         f_r += p[lay[L_K3]] * x * x * x
@@ -353,6 +358,8 @@ def rate(lay, cst, p, t, s, vmax):
     if lay[L_VD] >= 0:
         lam += abs(p[lay[L_VD] + 2])
         damp += abs(p[lay[L_VD] + 1]) * u
+    if lay[L_ST] >= 0 or lay[L_SF] >= 0:
+        damp += _fluid_slope(lay, cst, p, vmax)
     stiff *= m_k
     if lay[L_KIND] != DEVICE:
         m = mass(lay, cst, p)
@@ -412,6 +419,8 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
         deriv(lay, cst, p, tj + hs, am, tmp, k4)
         for q in range(ns):
             s[q] += hs / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+        if lay[L_FD] >= 0:
+            _coil_step(lay, p, s, a0[2] + (j / n_sub) * (a1[2] - a0[2]), am[2], hs)
         if lay[L_SA] >= 0:
             # amplitude envelope: follows peaks at once, decays with time constant T_env
             ie = lay[L_SE]

@@ -2,7 +2,7 @@
 
 :class:`Form` (a damper law) and :class:`Model` (a form with effects) live
 together here because ``Form + Effect`` builds a ``Model``; the five forms
-themselves are in :mod:`bayes_mr.models.forms`, the eight effects in
+themselves are in :mod:`bayes_mr.models.forms`, the effects in
 :mod:`bayes_mr.models.effects`, and :func:`bayes_mr.models.catalog.get_model`
 parses a model name. Nothing here imports those catalogues, so the layers
 stay acyclic: params, kernel → effects → model → forms → catalog.
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernel, term_kernel
-from .effects import Effect
+from .effects import DEVICE_ONLY, ON_COMMAND, Effect
 from .params import F_V, F_X, Coordinates, ParamSpec, Ratio, Scales
 
 #: The kinds of test a model is bound to: a storey on a shake table, the damper alone, or a
@@ -49,6 +49,8 @@ _OBS_DEFAULT = {"structure": ("displacement", "acceleration"), "device": ("force
 
 # Effects a form already contains.
 _BUILT_IN = {"spencer": ("voltage_dependence", "low_velocity_rolloff")}
+# Forms with a command path of their own (a filtered command state u).
+_COMMANDED = ("spencer",)
 
 
 def _check_kind(kind: str) -> int:
@@ -131,10 +133,30 @@ class Model:
                 return e
         return None
 
+    @property
+    def commanded(self) -> bool:
+        """Whether the model has a command path (``spencer``, or ``voltage_dependence`` on)."""
+        return self.form.name in _COMMANDED or self.effect("voltage_dependence") is not None
+
+    def check(self, kind: str) -> None:
+        """Raise ValueError when an effect cannot apply to a ``kind`` test of this model.
+
+        ``command_saturation`` and ``field_dynamics`` shape a command path the
+        model must have; ``inertia`` is a device-test effect. (Checked when the
+        model is bound to a kind, not on ``+``, so effects may be added in any order.)
+        """
+        _check_kind(kind)
+        for e in self.effects:
+            if e.name in ON_COMMAND and not self.commanded:
+                raise ValueError(f"{self.name}: '{e.name}' shapes the command path, which {self.form.name} "
+                                 "lacks — use spencer or add voltage_dependence")
+            if e.name in DEVICE_ONLY and kind != "device":
+                raise ValueError(f"{self.name}: '{e.name}' applies to device tests only ({DEVICE_ONLY[e.name]})")
+
     # --- parameters ----------------------------------------------------------
     def param_specs(self, kind: str) -> tuple[ParamSpec, ...]:
         """All parameters for a test of ``kind``, in kernel order."""
-        _check_kind(kind)
+        self.check(kind)
         specs: list[ParamSpec] = []
         if kind != "device" and not self.form.frame_in_form:
             specs.extend(FRAME)
@@ -309,7 +331,7 @@ class Model:
                 out.append(scales.velocity)
             elif name in hyst:
                 out.append(hyst[name])
-            else:  # filtered voltage of voltage_dependence
+            else:  # filtered voltage of voltage_dependence, coil current of field_dynamics
                 out.append(1.0)
         return np.array(out, float)
 
@@ -348,6 +370,10 @@ class Model:
             "small_amplitude_regime": kernel.L_SA,
             "low_velocity_rolloff": kernel.L_LVR,
             "cubic_stiffness": kernel.L_K3,
+            "command_saturation": kernel.L_CSAT,
+            "field_dynamics": kernel.L_FD,
+            "shear_thinning": kernel.L_ST,
+            "stribeck_friction": kernel.L_SF,
         }
         for e in self.effects:
             if e.name in slot:
@@ -356,6 +382,8 @@ class Model:
             lay[kernel.L_SU] = states.index("u")
         if self.effect("small_amplitude_regime"):
             lay[kernel.L_SE] = states.index("envelope")
+        if self.effect("field_dynamics"):
+            lay[kernel.L_SC] = states.index("coil")
         self._term_slots(lay, names, states)
         return lay
 
@@ -381,6 +409,8 @@ class Model:
         cst[kernel.K_TENV] = float(sa.options["t_env"]) if sa else 1.0
         cst[kernel.K_CACC] = c_acc
         cst[kernel.K_NMAX] = n_max
+        sf = self.effect("stribeck_friction")
+        cst[kernel.K_SMOOTH] = float(sf.options["smooth"]) if sf else 0.1
         return cst
 
     def delay_channel(self, kind: str) -> str | None:
