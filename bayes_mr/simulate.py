@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from ._specialise import kernel
 from .models import Model, get_model
 from .models.drivers import run_batch
 
@@ -197,12 +198,13 @@ def simulate(
     names = OUTPUT_NAMES[kind]
     out = np.empty((B, N, len(names)))
     failed = np.empty(B, dtype=np.int64)
+    run_batch_ = kernel(run_batch, lay)  # specialised to this model (see bayes_mr._specialise)
     if schedule is None:
         schedules = np.zeros((B, max(N - 1, 1)), dtype=np.int64)
-        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, False, failed)
+        run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, False, failed)
     else:
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
-        run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, True, failed)
+        run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt, inputs.rows, out, schedules, True, failed)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}
     channel = model.delay_channel(kind)
     if channel is not None:
