@@ -130,7 +130,7 @@ def _fingerprint(dispatcher) -> str:
     return h.hexdigest()
 
 
-def _source(dispatcher, lay: tuple[int, ...]) -> str:
+def _source(dispatcher, lay: tuple[int, ...], inline: tuple[str, ...]) -> str:
     """Text of the generated module: the layout as a global tuple and a wrapper with the generic signature."""
     py = dispatcher.py_func
     params = list(inspect.signature(py).parameters)
@@ -145,7 +145,7 @@ def _source(dispatcher, lay: tuple[int, ...]) -> str:
         f"from bayes_mr._jit import driver\n"
         f"from bayes_mr._specialise import private_chain\n"
         f"from {py.__module__} import {py.__name__}\n\n"
-        f"_generic = private_chain({py.__name__})\n"
+        f"_generic = private_chain({py.__name__}, inline={tuple(inline)!r})\n"
         f"LAY = {tuple(int(v) for v in lay)!r}\n\n\n"
         f"@driver({opt_text})\n"
         f"def {py.__name__}({args}):\n"
@@ -168,15 +168,15 @@ def _write_atomic(path: Path, text: str) -> None:
         raise
 
 
-def module_path(dispatcher, lay) -> Path:
+def module_path(dispatcher, lay, inline: tuple[str, ...] = INLINE) -> Path:
     """Path of the generated module specialising ``dispatcher`` to layout ``lay``."""
     lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
-    text = _source(dispatcher, lay_t)
+    text = _source(dispatcher, lay_t, inline)
     key = hashlib.sha256((_fingerprint(dispatcher) + text).encode()).hexdigest()[:20]
     return cache_dir() / f"k_{dispatcher.py_func.__name__}_{key}.py"
 
 
-def specialised(dispatcher, lay):
+def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
     """``dispatcher`` (a compiled kernel whose first argument is the layout) with ``lay`` fixed.
 
     Parameters
@@ -185,6 +185,9 @@ def specialised(dispatcher, lay):
         A generic kernel, e.g. :func:`bayes_mr.models.drivers.run_batch`.
     lay : int array
         The model's layout (:meth:`bayes_mr.models.Model.layout`).
+    inline : tuple of str
+        Names of the compiled functions inlined into their callers (default
+        :data:`INLINE`; fewer compile faster and run slower).
 
     Returns
     -------
@@ -193,14 +196,15 @@ def specialised(dispatcher, lay):
         compiles on its first call (or loads its machine code from the cache).
     """
     lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
-    key = (id(dispatcher), lay_t)
+    inline = tuple(inline)
+    key = (id(dispatcher), lay_t, inline)
     with _lock:
         fn = _loaded.get(key)
         if fn is not None:
             return fn
-        path = module_path(dispatcher, lay_t)
+        path = module_path(dispatcher, lay_t, inline)
         if not path.exists():
-            _write_atomic(path, _source(dispatcher, lay_t))
+            _write_atomic(path, _source(dispatcher, lay_t, inline))
         name = f"bayes_mr_kernels_{path.stem}"
         mod = sys.modules.get(name)
         if mod is None:
