@@ -29,6 +29,7 @@ import time as _time
 
 import numpy as np
 
+from .bench_kernels import kernel_bench
 from .inference import ukf
 from .inference import ukf_kernel as K
 from .likelihood import OutputError
@@ -237,7 +238,8 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
     mcmc_s = _time.perf_counter() - t0
     return {"lsq_s": lsq_s, "mcmc_s": mcmc_s, "mcmc_steps": chain.n_steps, "mcmc_walkers": chain.n_walkers,
             "mcmc_converged": chain.converged, "mcmc_tau_max": float(chain.tau.max()),
-            "mcmc_rhat_max": float(chain.rhat.max()), "mcmc_record": f"dahl, {duration:g} s at {fs:g} Hz"}
+            "mcmc_rhat_max": float(chain.rhat.max()), "mcmc_record": f"dahl, {duration:g} s at {fs:g} Hz",
+            "mcmc_tau": dict(zip(chain.names, map(float, chain.tau)))}
 
 
 def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, offset: float = 2.0) -> dict:
@@ -269,6 +271,8 @@ def run_bench(seed: int = 0, progress=print) -> dict:
     out.update(training_100(seed=seed))
     progress("least squares and MCMC …")
     out.update(lsq_and_mcmc(seed=seed))
+    progress("compiled kernels, generic vs specialised …")
+    out.update(kernel_bench())
     progress("diagnose on a 30 s record at 1 kHz …")
     out.update(diagnose_timing(seed=seed))
     return out

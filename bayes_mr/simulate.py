@@ -25,6 +25,7 @@ import numpy as np
 import xarray as xr
 
 from . import input_grid
+from ._specialise import kernel
 from .models import Model, get_model
 from .models.drivers import run_batch
 
@@ -262,7 +263,8 @@ def simulate(
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
     else:
         schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
-    run_batch(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S)
+    run_batch_ = kernel(run_batch, lay)  # specialised to this model (see bayes_mr._specialise)
+    run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S)
     # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
     failed = np.where(failed >= 0, (failed + S - 1) // S, -1)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}

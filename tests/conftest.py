@@ -8,8 +8,14 @@ build the small records several files use.
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import records
+
+# The suite simulates dozens of models once each: the generic kernel (compiled once, cached in the
+# package) suits that; the specialised kernels compile per model and are tested in test_specialise.py.
+os.environ.setdefault("BAYES_MR_KERNELS", "generic")
 
 
 @pytest.fixture(scope="session")

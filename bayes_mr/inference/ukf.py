@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import qmc
 
+from .._specialise import kernel
 from ..likelihood import OutputError, channel_noise
 from ..models import Model, Scales
 from ..models.params import Coordinates
@@ -281,11 +282,12 @@ def run_priors(
     )
     weights = (args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"], args["central"], stride)
     if parallel:
-        K.ukf_batch(*common, M, PP, Q, problem.R, *weights, HM, HS, INFO)
+        kernel(K.ukf_batch, args["lay"])(*common, M, PP, Q, problem.R, *weights, HM, HS, INFO)
     else:
         dummy = np.zeros((1, L))
+        run = kernel(K.ukf_run, args["lay"])
         for r in range(R_):
-            K.ukf_run(*common, M[r], PP[r], Q, problem.R, *weights, HM[r], HS[r], dummy, False, INFO[r])
+            run(*common, M[r], PP[r], Q, problem.R, *weights, HM[r], HS[r], dummy, False, INFO[r])
     wall = _time.perf_counter() - t0
     return dict(mean=M, cov=PP, info=INFO, hist_mean=HM, hist_sd=HS,
                 hist_index=np.arange(H) * stride, wall_s=wall)
@@ -314,7 +316,7 @@ def filter_states(
     info = np.zeros(K.INFO_SIZE)
     hm = np.zeros((1, L))
     hs = np.zeros((1, L))
-    K.ukf_run(
+    kernel(K.ukf_run, args["lay"])(
         args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
         args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
         m, P, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],

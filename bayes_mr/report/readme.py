@@ -55,6 +55,18 @@ def run_section(summary: dict, out_dir: str | Path, links: dict[str, str] | None
     return "\n".join(lines)
 
 
+def _kernel_rows(r: dict) -> list[tuple[str, str]]:
+    """Rows of the compiled-kernel figures (absent from bench files written before issue 16)."""
+    if "kernel_speedup" not in r:
+        return []
+    rows = [(f"simulate, {form}, structure test, per sample (generic → specialised kernel)",
+             f"{v['generic']:.0f} → {v['specialised']:.0f} ns") for form, v in r["simulate_ns_per_step"].items()]
+    rows.append(("specialised kernel speedup, dahl structure step", f"{r['kernel_speedup']:.1f}×"))
+    rows.append(("kernel compile, first run on a fresh machine / from the disk cache",
+                 f"{r['compile_s']['cold']:.0f} s / {r['compile_s']['warm']:.1f} s"))
+    return rows
+
+
 def bench_section(r: dict) -> str:
     """The README's bench section: the table of a benchmark run.
 
@@ -82,6 +94,7 @@ def bench_section(r: dict) -> str:
         (f"diagnose, {r['diagnose_record']}: cause named {r['diagnose_cause']}, MSE ratio "
          f"{r['diagnose_mse_ratio']:.3f}", f"{r['diagnose_s']:.0f} s"),
     ]
+    rows += _kernel_rows(r)
     lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
     lines.append("")
     lines.append(f"UKF model: {r['ukf_model']}; {r['threads']} threads. Written by `bayes-mr bench`.")

@@ -1,0 +1,234 @@
+"""Compiled kernels specialised to one model layout, cached on disk.
+
+The generic kernels (:mod:`bayes_mr.models.kernel`, the drivers, the UKF)
+read the model's int64 *layout* at run time, so one compiled kernel serves
+every ``FORM+EFFECT`` combination but branches on the layout at every
+sub-step. :func:`specialised` returns the same kernel with the layout fixed:
+a generated module (one per layout and kernel) holds the layout as a global
+tuple and a wrapper that passes it on to the generic kernel. numba types a
+global tuple of ints as a tuple of *literal* ints, and every compiled
+function it reaches is compiled again for that literal type — the layout
+becomes a compile-time constant there, and LLVM folds away the branches of
+the effects the model does not have. The physics stays in one place: a new
+effect added to the generic kernel is specialised with no change here.
+
+Cache. The generated modules live in ``$BAYES_MR_CACHE/kernels`` (default
+``~/.cache/bayes_mr/kernels``); numba caches their machine code next to
+them (``__pycache__``), so a fresh machine compiles each model once and a
+later process loads it from disk. A module's name hashes the layout, the
+kernel and the source of every module the kernel reaches, so editing the
+physics gives new modules instead of stale machine code (numba itself only
+checks the caller's file). Files are written to a temporary name and
+renamed, so concurrent processes (pytest workers, Dask) never see a partial
+file; two processes compiling the same kernel at once both succeed, and
+numba's own index writes are atomic too.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import os
+import sys
+import tempfile
+import threading
+import types
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+#: Environment variable naming the cache directory (generated kernels in its ``kernels`` subdirectory).
+CACHE_ENV = "BAYES_MR_CACHE"
+#: Environment variable choosing the kernels: ``specialised`` (default) or ``generic``.
+KERNELS_ENV = "BAYES_MR_KERNELS"
+
+#: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics).
+#: The constant layout alone (nothing inlined) measured 1.3x on the dahl structure step; inlining these
+#: too, 2-4x (dahl 356 -> 88 ns per sample), at about a minute of compilation per model and kernel.
+INLINE = ("deriv", "rate", "substeps", "advance", "observe")
+
+_loaded: dict[tuple, object] = {}
+_lock = threading.Lock()
+
+
+def cache_dir() -> Path:
+    """Directory of the generated kernel modules: ``$BAYES_MR_CACHE/kernels`` or ``~/.cache/bayes_mr/kernels``."""
+    root = os.environ.get(CACHE_ENV) or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bayes_mr")
+    return Path(root) / "kernels"
+
+
+def _is_dispatcher(obj) -> bool:
+    return hasattr(obj, "py_func") and hasattr(obj, "targetoptions")
+
+
+def _callees(py) -> list[tuple[str, object]]:
+    """(global name, dispatcher) of the compiled functions ``py`` refers to."""
+    out = []
+    for name in py.__code__.co_names:
+        g = py.__globals__.get(name)
+        if _is_dispatcher(g):
+            out.append((name, g))
+    return out
+
+
+def _reached_files(dispatcher) -> list[str]:
+    """Source files of every compiled function reachable from ``dispatcher`` through module globals."""
+    seen_fn: set[int] = set()
+    files: set[str] = set()
+    todo = [dispatcher]
+    while todo:
+        d = todo.pop()
+        if id(d) in seen_fn:
+            continue
+        seen_fn.add(id(d))
+        files.add(inspect.getsourcefile(d.py_func))
+        todo.extend(g for _, g in _callees(d.py_func))
+    return sorted(files)
+
+
+def private_chain(dispatcher, inline: tuple[str, ...] = INLINE):
+    """A private, uncached copy of ``dispatcher`` and of every compiled function it reaches.
+
+    Same code objects, so the same physics; but the copies resolve their
+    callees among the copies, are never written to (or read from) the
+    generic kernels' on-disk caches — whose index numba keys on the caller's
+    file alone, so a specialisation cached there would outlive an edit of
+    the physics — and the functions named in ``inline`` are inlined at
+    numba-IR level, so that the whole step sits in one LLVM function where
+    the constant layout folds and the states stay in registers. The
+    generated module's wrapper is the only cached artefact.
+    """
+    memo: dict[int, object] = {}
+
+    def copy(d):
+        if id(d) in memo:
+            return memo[id(d)]
+        py = d.py_func
+        glob = dict(py.__globals__)
+        fn = types.FunctionType(py.__code__, glob, py.__name__, py.__defaults__, py.__closure__)
+        fn.__qualname__ = py.__qualname__
+        fn.__doc__ = py.__doc__
+        opts = {k: v for k, v in d.targetoptions.items() if k not in ("nopython", "boundscheck")}
+        if py.__name__ in inline:
+            opts["inline"] = "always"
+        new = njit(**opts)(fn)
+        memo[id(d)] = new
+        for name, g in _callees(py):
+            glob[name] = copy(g)
+        return new
+
+    return copy(dispatcher)
+
+
+def _fingerprint(dispatcher) -> str:
+    """Hash of the source of every file the kernel reaches (changes when the physics does)."""
+    h = hashlib.sha256()
+    for f in _reached_files(dispatcher):
+        h.update(f.encode())
+        h.update(Path(f).read_bytes())
+    return h.hexdigest()
+
+
+def _source(dispatcher, lay: tuple[int, ...], inline: tuple[str, ...]) -> str:
+    """Text of the generated module: the layout as a global tuple and a wrapper with the generic signature."""
+    py = dispatcher.py_func
+    params = list(inspect.signature(py).parameters)
+    if params[0] != "lay":
+        raise ValueError(f"{py.__name__}: the layout must be the first argument to specialise on it")
+    opts = {k: v for k, v in dispatcher.targetoptions.items() if k == "nogil"}
+    opt_text = ", ".join(f"{k}={v!r}" for k, v in sorted(opts.items()))
+    args = ", ".join(params)
+    call = ", ".join(["LAY"] + params[1:])
+    return (
+        f'"""Generated by bayes_mr._specialise: {py.__module__}.{py.__name__} for one layout. Do not edit."""\n'
+        f"from bayes_mr._jit import driver\n"
+        f"from bayes_mr._specialise import private_chain\n"
+        f"from {py.__module__} import {py.__name__}\n\n"
+        f"_generic = private_chain({py.__name__}, inline={tuple(inline)!r})\n"
+        f"LAY = {tuple(int(v) for v in lay)!r}\n\n\n"
+        f"@driver({opt_text})\n"
+        f"def {py.__name__}({args}):\n"
+        f"    # ``lay`` is ignored: the layout is the constant LAY\n"
+        f"    return _generic({call})\n"
+    )
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def module_path(dispatcher, lay, inline: tuple[str, ...] = INLINE) -> Path:
+    """Path of the generated module specialising ``dispatcher`` to layout ``lay``."""
+    lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
+    text = _source(dispatcher, lay_t, inline)
+    key = hashlib.sha256((_fingerprint(dispatcher) + text).encode()).hexdigest()[:20]
+    return cache_dir() / f"k_{dispatcher.py_func.__name__}_{key}.py"
+
+
+def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
+    """``dispatcher`` (a compiled kernel whose first argument is the layout) with ``lay`` fixed.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        A generic kernel, e.g. :func:`bayes_mr.models.drivers.run_batch`.
+    lay : int array
+        The model's layout (:meth:`bayes_mr.models.Model.layout`).
+    inline : tuple of str
+        Names of the compiled functions inlined into their callers (default
+        :data:`INLINE`; fewer compile faster and run slower).
+
+    Returns
+    -------
+    numba dispatcher
+        Same signature as ``dispatcher``; its ``lay`` argument is ignored. It
+        compiles on its first call (or loads its machine code from the cache).
+    """
+    lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
+    inline = tuple(inline)
+    key = (id(dispatcher), lay_t, inline)
+    with _lock:
+        fn = _loaded.get(key)
+        if fn is not None:
+            return fn
+        path = module_path(dispatcher, lay_t, inline)
+        if not path.exists():
+            _write_atomic(path, _source(dispatcher, lay_t, inline))
+        name = f"bayes_mr_kernels_{path.stem}"
+        mod = sys.modules.get(name)
+        if mod is None:
+            spec = importlib.util.spec_from_file_location(name, path)
+            mod = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(mod)
+            sys.modules[name] = mod
+        fn = getattr(mod, dispatcher.py_func.__name__)
+        _loaded[key] = fn
+        return fn
+
+
+def kernel(dispatcher, lay):
+    """The kernel to run for layout ``lay``: specialised, or the generic one when ``$BAYES_MR_KERNELS=generic``.
+
+    Both give the same numbers (the specialised kernel is the generic code
+    with the layout constant); the generic one needs no compilation per
+    model, which suits short runs over many models (the test suite).
+    """
+    choice = os.environ.get(KERNELS_ENV, "specialised").strip().lower()
+    if choice == "generic":
+        return dispatcher
+    if choice != "specialised":
+        raise ValueError(f"{KERNELS_ENV}={choice!r}: give 'specialised' or 'generic'")
+    return specialised(dispatcher, lay)

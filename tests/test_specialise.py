@@ -1,0 +1,164 @@
+"""Kernels specialised per model layout give the generic kernel's numbers, and cache on disk.
+
+The generic kernel is the reference: the specialised one is the same code
+with the layout a compile-time constant, so outputs agree to 1e-12 (they are
+in fact identical where LLVM keeps the operation order). Each specialisation
+compiles for tens of seconds, so all but one case are ``slow``.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from records import device_inputs, structure_inputs
+
+from bayes_mr import _specialise as S
+from bayes_mr.models import get_model
+from bayes_mr.models.drivers import run_batch, run_one
+from bayes_mr.simulate import Inputs
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """A private kernel cache, so tests never write generated modules outside tmp."""
+    monkeypatch.setenv(S.CACHE_ENV, str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def _forced_inputs(n: int = 1500, fs: float = 1000.0) -> Inputs:
+    t = np.arange(n) / fs
+    return Inputs.forced(40.0 * np.sin(2 * np.pi * 2.0 * t) * np.clip(t / 0.2, 0, 1), 1 / fs,
+                         command=np.where(np.sin(2 * np.pi * 0.7 * t) > 0, 2.25, 0.0))
+
+
+def _inputs(kind: str) -> Inputs:
+    if kind == "structure":
+        return structure_inputs(3.0, 50.0)
+    if kind == "device":
+        return device_inputs(0.01)
+    return _forced_inputs()
+
+
+def _both(name: str, kind: str, inline=S.INLINE, driver=run_batch):
+    """Outputs and schedules of the generic and of the specialised kernel on the same inputs."""
+    m = get_model(name)
+    inp = _inputs(kind)
+    lay, cst = m.layout(kind), m.constants(inp.mass)
+    P = np.atleast_2d(m.theta(kind, {}))
+    n_out = 4 if kind != "device" else 2
+    res = []
+    for fn in (driver, S.specialised(driver, lay, inline)):
+        out = np.empty((1, inp.n, n_out))
+        sched = np.zeros((1, inp.n - 1), np.int64)
+        if driver is run_batch:
+            failed = np.empty(1, np.int64)
+            fn(lay, cst, P, inp.dt, inp.rows, out, sched, False, failed)
+        else:
+            fn(lay, cst, P[0], inp.dt, inp.rows, out[0], sched[0], False)
+        res.append((out, sched))
+    return res
+
+
+def _assert_same(res):
+    (out_g, sch_g), (out_s, sch_s) = res
+    assert np.isfinite(out_g).all()
+    np.testing.assert_array_equal(sch_s, sch_g)
+    np.testing.assert_allclose(out_s, out_g, rtol=1e-12, atol=1e-12 * np.abs(out_g).max())
+
+
+def test_specialised_matches_generic_and_caches_outside_the_repo(cache):
+    """dahl, structure test, nothing inlined (the cheapest specialisation): same numbers; files only in the cache."""
+    before = set(REPO.rglob("k_*.py"))
+    _assert_same(_both("dahl", "structure", inline=(), driver=run_one))
+    generated = list((cache / "kernels").glob("k_run_one_*.py"))
+    assert len(generated) == 1
+    assert "LAY = (" in generated[0].read_text()
+    assert set(REPO.rglob("k_*.py")) == before
+    assert not list((cache / "kernels").glob("*.tmp"))
+
+
+def test_kernel_switch(monkeypatch, cache):
+    lay = get_model("dahl").layout("structure")
+    monkeypatch.setenv(S.KERNELS_ENV, "generic")
+    assert S.kernel(run_batch, lay) is run_batch
+    monkeypatch.setenv(S.KERNELS_ENV, "fast")
+    with pytest.raises(ValueError, match="specialised"):
+        S.kernel(run_batch, lay)
+
+
+def test_module_name_follows_the_physics(cache, tmp_path):
+    """The generated module's name hashes the layout and the kernel's sources: another layout, another module."""
+    a = S.module_path(run_batch, get_model("dahl").layout("structure"))
+    b = S.module_path(run_batch, get_model("dahl+force_offset").layout("structure"))
+    c = S.module_path(run_batch, get_model("dahl").layout("structure"), inline=())
+    assert len({a, b, c}) == 3
+    files = S._reached_files(run_batch)
+    assert any(f.endswith("kernel.py") for f in files) and any(f.endswith("drivers.py") for f in files)
+
+
+FORMS = ["normalized-bouc-wen", "dahl", "lugre", "bouc-wen", "spencer"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("form", FORMS)
+def test_every_form_structure(cache, form):
+    _assert_same(_both(form, "structure"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,kind", [
+    ("dahl+force_offset+voltage_dependence", "device"),
+    ("lugre+stiffness_drift+asymmetry", "structure"),
+    ("bouc-wen+small_amplitude_regime+low_velocity_rolloff", "device"),
+    ("dahl+cubic_stiffness", "forced"),
+])
+def test_effects_and_kinds(cache, name, kind):
+    _assert_same(_both(name, kind))
+
+
+@pytest.mark.slow
+def test_ukf_outputs_match(cache, monkeypatch):
+    from bayes_mr.inference import ukf
+    from bayes_mr.likelihood import OutputError
+    from records import structure_record
+
+    rec = structure_record("dahl", {}, n=1500)
+    problem = ukf.make_problem(OutputError("dahl", rec))
+    priors = ukf.lhs_priors(problem.coords, seed=0)[:4]
+    out = {}
+    for mode in ("generic", "specialised"):
+        monkeypatch.setenv(S.KERNELS_ENV, mode)
+        out[mode] = ukf.run_priors(problem, priors)
+    for key in ("mean", "cov", "info", "hist_mean", "hist_sd"):
+        a, b = out["generic"][key], out["specialised"][key]
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * np.nanmax(np.abs(a)), equal_nan=True)
+
+
+@pytest.mark.slow
+def test_second_process_loads_from_disk(cache):
+    """A fresh process finds the machine code the first one compiled (warm start well under the cold one)."""
+    code = (
+        "import time, numpy as np; t0 = time.perf_counter()\n"
+        "from bayes_mr import _specialise as S\nfrom bayes_mr.models import get_model\n"
+        "from bayes_mr.models.drivers import run_one\n"
+        "m = get_model('lugre'); lay = m.layout('device')\n"
+        "fn = S.specialised(run_one, lay, inline=())\n"
+        "x = np.linspace(0, 1, 50); rows = np.stack([0.01 * np.sin(6 * x), 0.06 * np.cos(6 * x), 0 * x], 1)\n"
+        "out = np.empty((50, 2)); fn(lay, m.constants(), m.theta('device', {}), 0.02, rows, out,"
+        " np.zeros(49, np.int64), False)\n"
+        "print(time.perf_counter() - t0, len(fn.stats.cache_hits))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    cold = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    warm = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    t_cold, hits_cold = cold.stdout.split()
+    t_warm, hits_warm = warm.stdout.split()
+    assert int(hits_cold) == 0 and int(hits_warm) == 1
+    assert float(t_warm) < float(t_cold)
