@@ -255,3 +255,17 @@ def test_rest_start_and_output_at_first_sample():
     sim = simulate(model, inputs, model.theta("structure"))
     assert sim["displacement"][0] == 0.0 and sim["velocity"][0] == 0.0
     assert sim["acceleration"][0] == 0.0
+
+
+def test_the_compiled_cache_is_keyed_by_every_compiling_source(tmp_path):
+    """An edit of a kernel file changes the cache directory (numba alone checks only a function's own
+    file, so a driver that inlined an edited kernel would load stale machine code); other edits do not."""
+    from bayes_mr._jit import _source_key
+
+    (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return x\n")
+    (tmp_path / "report.py").write_text("def g():\n    return 1\n")
+    key = _source_key(tmp_path)
+    (tmp_path / "report.py").write_text("def g():\n    return 2\n")
+    assert _source_key(tmp_path) == key
+    (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return 2 * x\n")
+    assert _source_key(tmp_path) != key
