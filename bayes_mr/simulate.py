@@ -263,7 +263,7 @@ def simulate(
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
     else:
         schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
-    run_batch_ = kernel(run_batch, lay)  # specialised to this model (see bayes_mr._specialise)
+    run_batch_ = kernel(run_batch, lay, work=B * rows.shape[0])  # specialised when it pays (bayes_mr._specialise)
     run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S)
     # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
     failed = np.where(failed >= 0, (failed + S - 1) // S, -1)

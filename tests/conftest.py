@@ -15,7 +15,7 @@ import records
 
 # The suite simulates dozens of models once each: the generic kernel (compiled once, cached in the
 # package) suits that; the specialised kernels compile per model and are tested in test_specialise.py.
-os.environ.setdefault("BAYES_MR_KERNELS", "generic")
+os.environ.setdefault("BAYES_MR_KERNELS", "generic")  # no per-model compiles in the suite (auto would specialise long fits)
 
 
 @pytest.fixture(scope="session")

@@ -93,6 +93,16 @@ def test_kernel_switch(monkeypatch, cache):
         S.kernel(run_batch, lay)
 
 
+def test_auto_specialises_only_when_it_pays(monkeypatch, cache):
+    """``auto`` runs the generic kernel for small jobs and switches once the work pays for a compile."""
+    lay = get_model("lugre+force_offset").layout("device")
+    monkeypatch.setenv(S.KERNELS_ENV, "auto")
+    assert S.kernel(run_batch, lay, work=1e6) is run_batch
+    assert S.kernel(run_batch, lay, work=S.AUTO_WORK / 2) is run_batch
+    monkeypatch.setattr(S, "specialised", lambda d, l: "specialised")
+    assert S.kernel(run_batch, lay, work=S.AUTO_WORK / 2) == "specialised"
+
+
 def test_module_name_follows_the_physics(cache, tmp_path):
     """The generated module's name hashes the layout and the kernel's sources: another layout, another module."""
     a = S.module_path(run_batch, get_model("dahl").layout("structure"))

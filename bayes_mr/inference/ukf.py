@@ -281,11 +281,12 @@ def run_priors(
         args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
     )
     weights = (args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"], args["central"], stride)
+    work = R_ * problem.inputs.n * (2 * L + 1)  # sigma points propagated per sample
     if parallel:
-        kernel(K.ukf_batch, args["lay"])(*common, M, PP, Q, problem.R, *weights, HM, HS, INFO)
+        kernel(K.ukf_batch, args["lay"], work)(*common, M, PP, Q, problem.R, *weights, HM, HS, INFO)
     else:
         dummy = np.zeros((1, L))
-        run = kernel(K.ukf_run, args["lay"])
+        run = kernel(K.ukf_run, args["lay"], work)
         for r in range(R_):
             run(*common, M[r], PP[r], Q, problem.R, *weights, HM[r], HS[r], dummy, False, INFO[r])
     wall = _time.perf_counter() - t0
