@@ -126,7 +126,7 @@ def linear_device_problem(n=600, noise=0.01, seed=1):
     rec = make_record(np.arange(n) * inputs.dt,
                       {"displacement": inputs.rows[:, 0], "velocity": inputs.rows[:, 1],
                            "force": force + sd * rng.standard_normal(n)},
-                      source="linear-lugre", attrs={"noise_sd_force": sd})
+                      source="linear-lugre", attrs={"noise_sd_force": sd, "input_interp": "linear"})
     lik = OutputError("lugre", rec, fixed={"epsilon": 500.0, "alpha": 1000.0}, noise="fixed")
     names = model.param_names("device")
     free = [names.index(p) for p in lik.par.names]

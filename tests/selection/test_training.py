@@ -429,14 +429,21 @@ def test_ukf_fit_round_trips_with_the_spec_summary(dahl_a, dahl_b, tmp_path):
     sel = summary["selected_run"]
     assert summary["log_evidence"] == pytest.approx(float(training["log_evidence"].sel(run=sel)), rel=1e-12)
     assert sel == int(back["ukf_validation"].attrs["best"])
-    # posterior: draws of the selected run's Gaussian on φ = ln(sθ), so θ is log-normal with
-    # mean θ̂·exp(σ_φ²/2); the draws' mean must match it within 4 Monte Carlo standard errors
+    # posterior: draws of the selected run's Gaussian on φ = ln(sθ) after the refinement passes
+    # (UKFSettings.refine_passes), so θ is log-normal with mean θ̂·exp(σ_φ²/2); the draws' mean must
+    # match it within 4 Monte Carlo standard errors
     post = back.posterior
     assert post.sizes["chain"] == 1 and post.sizes["draw"] == 300
+    lik = OutputError("dahl", a)
+    run = training.sel(run=sel)
+    ref = ukf.refine(ukf.make_problem(lik, ukf.UKFSettings()), run["final_phi"].values, run["final_cov_phi"].values,
+                     ukf.UKFSettings())
+    assert ref["passes"] == summary["refine_passes"] == 2
+    refined = dict(zip(lik.par.names, lik.par.coords.to_theta(ref["phi"])))
     point = results.point_of(back)
     for j, (name, value) in enumerate(point.items()):
-        assert value == pytest.approx(float(training["final_mean"].sel(run=sel, param=name)), rel=1e-12)
-        var_phi = float(training["final_cov_phi"].sel(run=sel, param=name, param_=name))
+        assert value == pytest.approx(refined[name], rel=1e-12)
+        var_phi = float(ref["cov"][j, j])
         mcse = float(post[name].std()) / math.sqrt(300)
         assert abs(summary["params"][name] - value * math.exp(var_phi / 2)) < 4 * mcse
         assert abs(value / theta[j] - 1) < 0.05
