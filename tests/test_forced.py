@@ -235,3 +235,15 @@ def test_cli_forced_simulate_fit_validate_warmup(tmp_path, capsys):
     assert v["warmup_s"] == 0.5 and set(v["rmse"]) == {"displacement"} and v["rmse"]["displacement"] > 0
     full = validate(results.load_result(out), rec)
     assert full["rmse"]["displacement"] != v["rmse"]["displacement"]
+
+
+@pytest.mark.slow
+def test_boucwen_benchmark_training_record_lsq():
+    """The packaged benchmark record, defaults only (no mass, no --prior): the true system within 3 sd."""
+    from bayes_mr.data import load_packaged
+
+    truth = {"m": 2.0, "c": 10.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0}
+    rec = load_packaged("boucwen-benchmark")
+    assert rec.sizes["time"] == 40960 and rec.attrs["kind"] == "forced" and "mass" not in rec.attrs
+    s = assert_recovered(Identify("bouc-wen", LeastSquares()).fit(rec, progress=False), truth)
+    assert s["rmse"]["displacement"] < 2e-5

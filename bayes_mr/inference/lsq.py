@@ -10,7 +10,8 @@
    weighted by the noise SD of each channel, then re-weighted once by the
    residual RMS (the maximum-likelihood σ_c when σ is unknown). On a long
    record (more than ``head_samples`` samples) steps 1–2 run on the record's
-   head and only the best start is refined on the whole record: the search
+   head, each start with a quarter of ``max_nfev``, and only the best start
+   is refined further, on the head and then on the whole record: the search
    among starts needs the dynamics, not every period of a stationary test
    (the Bouc–Wen benchmark's 40,960 samples: ~12 min → ~1 min), and the
    estimate, its covariance and evidence are still the whole record's.
@@ -247,13 +248,18 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
     t0 = _time.perf_counter()
     say = progress or (lambda msg: None)
     n = lik.y.shape[0]
-    head = lik if settings.head_samples is None or n <= settings.head_samples else _head(lik, settings.head_samples)
-    runs = _search(head, settings, say)
-    phi = min(runs, key=lambda r: r["cost"])["phi"]
     sd = lik.noise_sd.copy()
-    if head is not lik:
+    if settings.head_samples is None or n <= settings.head_samples:
+        runs = _search(lik, settings, say, settings.max_nfev)
+        phi = min(runs, key=lambda r: r["cost"])["phi"]
+    else:
+        # starts get a quarter of the evaluations on the head (a start far off in a stiff corner of the box
+        # costs many sub-steps per evaluation), the best one the rest, then the whole record
+        head = _head(lik, settings.head_samples)
+        runs = _search(head, settings, say, max(settings.max_nfev // 4, 1))
+        phi = _refine(head, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
         phi = _refine(lik, phi, sd, settings.max_nfev).x
-        say(f"best start refined on all {n} samples")
+        say(f"best start refined on the first {settings.head_samples}, then on all {n} samples")
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
@@ -271,7 +277,7 @@ def _head(lik: OutputError, n: int) -> OutputError:
                        noise_sd=lik.noise_sd, scales=lik.scales)
 
 
-def _search(lik: OutputError, settings: LSQSettings, say) -> list[dict]:
+def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int) -> list[dict]:
     """Steps 1–2 of the module docstring: screen candidates, refine the best ``n_starts``; one dict per start."""
     cands = candidates(lik, settings.n_candidates, settings.seed)
     sub = LinearSubfit(lik) if linear_names(lik) else None
@@ -288,7 +294,7 @@ def _search(lik: OutputError, settings: LSQSettings, say) -> list[dict]:
     starts = [c for cost, c in scored[: settings.n_starts] if np.isfinite(cost)] or [cands[0]]
     runs = []
     for i, phi0 in enumerate(starts):
-        res = _refine(lik, phi0, lik.noise_sd.copy(), settings.max_nfev)
+        res = _refine(lik, phi0, lik.noise_sd.copy(), max_nfev)
         runs.append({"phi0": phi0, "phi": res.x, "cost": float(res.cost), "nfev": int(res.nfev),
                      "status": int(res.status), "message": str(res.message)})
         say(f"start {i + 1}/{len(starts)}: cost {res.cost:.4g}")
