@@ -16,6 +16,10 @@
   ``trained_fraction`` is the share of runs that completed.
 * **MCMC and least squares** — ``dahl`` (4 parameters + 2 noise SDs) on a
   25 s band-limited structure test at 1 kHz (emcee until 50 τ).
+* **The Bouc–Wen benchmark** — ``bouc-wen`` (6 parameters with the mass,
+  + 1 noise SD) on the packaged 40 960-sample training record of Noël &
+  Schoukens (2016), least squares then emcee from it, with the largest
+  distance of the estimate from the benchmark's true values in posterior SDs.
 
 :func:`run_bench` returns every number; ``bayes-mr bench --json F`` writes
 them to ``F`` and nothing else (``scripts/update_readme.py`` builds the
@@ -242,6 +246,36 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
             "mcmc_tau": dict(zip(chain.names, map(float, chain.tau)))}
 
 
+def boucwen_benchmark_timing(seed: int = 0) -> dict:
+    """Wall times of ``fit --model bouc-wen`` (lsq, then MCMC) on the packaged Bouc–Wen benchmark record.
+
+    Returns the ``boucwen_*`` keys: ``boucwen_lsq_s``, ``boucwen_mcmc_s`` [s],
+    the chain's size and convergence, and ``boucwen_lsq_max_z`` /
+    ``boucwen_mcmc_max_z``: the largest |estimate − true| / sd over the
+    parameters (the benchmark's published system; a check, never a start).
+    """
+    from .data import load_packaged
+    from .inference.lsq import fit_lsq
+    from .inference.mcmc import MCMCSettings, fit_mcmc
+
+    truth = {"m": 2.0, "c": 10.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0}
+    lik = OutputError("bouc-wen", load_packaged("boucwen-benchmark"))
+    t0 = _time.perf_counter()
+    res = fit_lsq(lik)
+    lsq_s = _time.perf_counter() - t0
+    t0 = _time.perf_counter()
+    chain = fit_mcmc(lik, lsq=res, settings=MCMCSettings(seed=seed, progress=False))
+    mcmc_s = _time.perf_counter() - t0
+    p = lik.n_params
+    draws = lik.par.coords.to_theta(chain.chain[chain.burn:, :, :p].reshape(-1, p))
+    z_mcmc = np.abs(draws.mean(axis=0) - [truth[n] for n in lik.names]) / draws.std(axis=0)
+    z_lsq = [abs(res.theta[n] - truth[n]) / res.sd_theta[n] for n in lik.names]
+    return {"boucwen_lsq_s": lsq_s, "boucwen_mcmc_s": mcmc_s, "boucwen_mcmc_steps": chain.n_steps,
+            "boucwen_mcmc_walkers": chain.n_walkers, "boucwen_mcmc_converged": chain.converged,
+            "boucwen_lsq_max_z": float(max(z_lsq)), "boucwen_mcmc_max_z": float(z_mcmc.max()),
+            "boucwen_record": f"Bouc–Wen benchmark training record, {lik.y.shape[0]} samples"}
+
+
 def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, offset: float = 2.0) -> dict:
     """Wall time of ``diagnose`` on a 30 s, 1 kHz structure test with a hidden force offset.
 
@@ -275,4 +309,6 @@ def run_bench(seed: int = 0, progress=print) -> dict:
     out.update(kernel_bench())
     progress("diagnose on a 30 s record at 1 kHz …")
     out.update(diagnose_timing(seed=seed))
+    progress("bouc-wen on the Bouc–Wen benchmark record (lsq, MCMC) …")
+    out.update(boucwen_benchmark_timing(seed=seed))
     return out

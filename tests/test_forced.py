@@ -116,15 +116,31 @@ def test_negative_gamma_bouc_wen_forced_lsq():
     truth = {"c": 200.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0, "m": 2.0}
     m = get_model("bouc-wen")
     spec = {s.name: s for s in m.param_specs("forced")}["gamma"]
-    # sign-free: log scale over its default positive range, linear once a range reaches γ ≤ 0
-    assert spec.sign_free and spec.log_scaled(1.0) and not spec.log_scaled(-1e4)
+    # sign-free: log scale over a positive range given, signed-log (asinh) over one reaching γ ≤ 0 — the default
+    assert spec.sign_free and spec.log_scaled(1.0) and spec.signed_log(-1e4) and not spec.log_scaled(-1e4)
     rec = forced_record("bouc-wen", truth, ("displacement",), seed=7, amplitude=40.0)
-    # a user who knows the law has n = 1 fixes it and gives β₁, γ ranges in its units (1/m, --prior):
-    # the default ranges are relative to X⁻² (n ≈ 2), where least squares from 48 candidates falls into the
-    # β₁ ≈ −γ valley of this short record
-    idata = Identify("bouc-wen", LeastSquares(), fixed={"n": 1.0},
-                     ranges={"beta1": (10.0, 1e4), "gamma": (-1e4, 1e4)}).fit(rec, progress=False)
-    assert_recovered(idata, truth, names=("c", "k", "beta1", "gamma", "m"))
+    lik = OutputError("bouc-wen", rec)
+    j = lik.par.names.index("gamma")
+    assert lik.par.coords.asinh[j] and lik.par.coords.lower[j] < 0 < lik.par.coords.upper[j]
+    # defaults only: displacement measured, mass unknown, n free, no --prior
+    idata = Identify("bouc-wen", LeastSquares()).fit(rec, progress=False)
+    assert_recovered(idata, truth)
+
+
+def test_signed_log_coordinates_round_trip():
+    from bayes_mr.models.params import Coordinates
+
+    spec = {s.name: s for s in get_model("bouc-wen").param_specs("forced")}["gamma"]
+    coords = Coordinates.build((spec,), {"gamma": (-1e4, 1e4)})
+    theta = np.array([[-1100.0], [-0.01], [0.0], [3.0], [9000.0]])
+    phi = coords.to_phi(theta)
+    assert np.allclose(coords.to_theta(phi), theta, rtol=1e-12, atol=1e-12)
+    # log-like resolution on both signs, symmetric; dθ/dφ and ln|dθ/dφ| agree with finite differences
+    assert np.isclose(phi[0, 0], -coords.to_phi(np.array([[1100.0]]))[0, 0])
+    h = 1e-6
+    fd = (coords.to_theta(phi + h) - coords.to_theta(phi - h)) / (2 * h)
+    assert np.allclose(coords.dtheta_dphi(phi), fd, rtol=1e-6)
+    assert np.allclose(coords.jacobian_log_det(phi), np.log(fd[:, 0]), rtol=1e-6)
 
 
 def test_divergent_law_is_recorded_not_raised():
@@ -219,3 +235,15 @@ def test_cli_forced_simulate_fit_validate_warmup(tmp_path, capsys):
     assert v["warmup_s"] == 0.5 and set(v["rmse"]) == {"displacement"} and v["rmse"]["displacement"] > 0
     full = validate(results.load_result(out), rec)
     assert full["rmse"]["displacement"] != v["rmse"]["displacement"]
+
+
+@pytest.mark.slow
+def test_boucwen_benchmark_training_record_lsq():
+    """The packaged benchmark record, defaults only (no mass, no --prior): the true system within 3 sd."""
+    from bayes_mr.data import load_packaged
+
+    truth = {"m": 2.0, "c": 10.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0}
+    rec = load_packaged("boucwen-benchmark")
+    assert rec.sizes["time"] == 40960 and rec.attrs["kind"] == "forced" and "mass" not in rec.attrs
+    s = assert_recovered(Identify("bouc-wen", LeastSquares()).fit(rec, progress=False), truth)
+    assert s["rmse"]["displacement"] < 2e-5

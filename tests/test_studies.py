@@ -15,7 +15,8 @@ def run_study(name, tmp_path, *extra):
 
 
 def test_studies_are_listed():
-    assert {"table-3-2", "numerical-selection", "virtual-shake-table", "chapter5-real-record"} <= set(study_names())
+    assert {"table-3-2", "numerical-selection", "virtual-shake-table", "chapter5-real-record",
+            "boucwen-benchmark"} <= set(study_names())
 
 
 def test_table_3_2_quick(tmp_path):
@@ -63,3 +64,13 @@ def test_numerical_selection_full(tmp_path):
     _, summary = run_study("numerical-selection", tmp_path)
     assert summary["dahl_max_error"] < 0.05
     assert summary["dahl_trained_fraction"] >= 0.9
+
+
+@pytest.mark.slow
+def test_boucwen_benchmark_quick(tmp_path):
+    """The Bouc–Wen benchmark study: five forms by least squares, bouc-wen selected, a held-out period scored."""
+    out, summary = run_study("boucwen-benchmark", tmp_path, "--quick")
+    assert (out / "report.md").exists() and (out / "figures" / "spectra.png").exists()
+    assert summary["selected"] == "bouc-wen"
+    assert summary["max_abs_z"]["lsq"] < 3
+    assert summary["held_out_rmse"] < 2e-5

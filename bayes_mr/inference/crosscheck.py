@@ -29,7 +29,12 @@ def _ukf_theta_moments(mean: np.ndarray, var: np.ndarray, coords: Coordinates) -
     sd_log = m_log * np.sqrt(np.expm1(var))
     m_lin = mean / coords.scale
     sd_lin = np.sqrt(var) / coords.scale
-    return np.where(coords.log, m_log, m_lin), np.where(coords.log, sd_log, sd_lin)
+    # θ = sinh(φ)/s: E sinh φ = sinh μ e^{v/2}, E sinh² φ = (cosh 2μ e^{2v} − 1)/2
+    m_asinh = np.sinh(mean) * np.exp(0.5 * var) / coords.scale
+    e2 = 0.5 * (np.cosh(2 * mean) * np.exp(2 * var) - 1.0) / coords.scale**2
+    sd_asinh = np.sqrt(np.clip(e2 - m_asinh**2, 0.0, None))
+    mean_th = np.where(coords.log, m_log, np.where(coords.asinh, m_asinh, m_lin))
+    return mean_th, np.where(coords.log, sd_log, np.where(coords.asinh, sd_asinh, sd_lin))
 
 
 def ukf_vs_mcmc(

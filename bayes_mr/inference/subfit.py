@@ -157,6 +157,8 @@ class LinearSubfit:
             if coords.log[j]:
                 th = max(th, coords.lower[j])
                 out[j] = math.log(coords.scale[j] * th)
+            elif coords.asinh[j]:
+                out[j] = math.asinh(coords.scale[j] * th)
             else:
                 out[j] = coords.scale[j] * th
         cost = float(np.mean((A @ (theta_lin / self.ref) - b) ** 2))

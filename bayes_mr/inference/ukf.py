@@ -202,12 +202,12 @@ def _kernel_args(problem: Problem, settings: UKFSettings):
     margin = settings.box_decades * math.log(10.0)
     lo, hi = coords.phi_lower, coords.phi_upper
     width = hi - lo
-    phi_lo = np.where(coords.log, lo - margin, lo - settings.box_decades * width)
-    phi_hi = np.where(coords.log, hi + margin, hi + settings.box_decades * width)
+    phi_lo = np.where(coords.log_like, lo - margin, lo - settings.box_decades * width)
+    phi_hi = np.where(coords.log_like, hi + margin, hi + settings.box_decades * width)
     lay = model.layout(kind, problem.channels)  # the filter predicts the channels the likelihood measures
     cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max)
     return dict(
-        lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.log,
+        lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.code,
         scale=coords.scale, phi_lo=phi_lo, phi_hi=phi_hi, h=problem.inputs.dt,
         inputs=problem.inputs.rows, yobs=np.ascontiguousarray(problem.yobs), valid=problem.valid,
         w0m=w0m, w0c=w0c, wi=wi, spread=pts.spread(L), ab=pts.beta - pts.alpha**2, central=pts.central,

@@ -62,7 +62,12 @@ def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
             v = phi_lo[j]
         elif v > phi_hi[j]:
             v = phi_hi[j]
-        th[free_idx[j]] = (math.exp(v) if is_log[j] else v) / scale[j]
+        c = is_log[j]  # Coordinates.code: 1 log, 2 signed-log (asinh), 0 linear
+        if c == 1:
+            v = math.exp(v)
+        elif c == 2:
+            v = math.sinh(v)
+        th[free_idx[j]] = v / scale[j]
 
 
 @hot(inline="always")

@@ -47,7 +47,7 @@ The training Dataset:
     * ``history_mean`` (run, hist, param): θ [SI] along the record;
       ``history_sd_phi``: SD of φ; coordinate ``hist_time`` [s];
     * ``phi_scale``, ``phi_log``, ``lower``, ``upper`` (param): the
-      coordinates φ = ln(s·θ) (or s·θ) and the plausible ranges [SI].
+      coordinates φ = ln(s·θ), asinh(s·θ) or s·θ (``phi_log`` 1, 2, 0) and the plausible ranges [SI].
 
     Attributes: ``model``, ``kind``, ``source``, ``n_lhs``, ``taus``,
     ``n_priors``, ``settings`` (JSON), ``fixed`` and ``ranges`` (JSON),
@@ -384,7 +384,7 @@ def _assemble(problem: Problem, priors: list[Prior], finished, settings: UKFSett
     sd_phi = np.sqrt(np.clip(np.diagonal(cov_phi, axis1=1, axis2=2), 0.0, None))
     final_theta = coords.to_theta(final_phi)
     # delta method: dθ/dφ = θ for φ = ln(sθ), 1/s for φ = sθ
-    final_sd = np.where(coords.log, np.abs(final_theta) * sd_phi, sd_phi / coords.scale)
+    final_sd = coords.dtheta_dphi(final_phi) * sd_phi
     prior_mean = np.array([priors[i].mean for i in idx]).reshape(-1, p)
     prior_sd = np.array([priors[i].sd for i in idx]).reshape(-1, p)
     with np.errstate(invalid="ignore"):
@@ -409,7 +409,7 @@ def _assemble(problem: Problem, priors: list[Prior], finished, settings: UKFSett
         "history_mean": (("run", "hist", "param"), hist_theta, {"units": "SI"}),
         "history_sd_phi": (("run", "hist", "param"), cat["hist_sd"][:, :, ns:]),
         "phi_scale": ("param", coords.scale),
-        "phi_log": ("param", coords.log.astype(np.int8)),
+        "phi_log": ("param", coords.code),
         "lower": ("param", coords.lower, {"units": "SI"}),
         "upper": ("param", coords.upper, {"units": "SI"}),
     }
@@ -428,7 +428,7 @@ def _assemble(problem: Problem, priors: list[Prior], finished, settings: UKFSett
 def to_theta(training: xr.Dataset, phi: np.ndarray) -> np.ndarray:
     """θ [SI] from φ (..., p) in a training Dataset's coordinates."""
     scale = training["phi_scale"].values
-    log = training["phi_log"].values.astype(bool)
+    code = training["phi_log"].values  # Coordinates.code: 0 linear, 1 log, 2 asinh
     phi = np.asarray(phi, float)
     with np.errstate(over="ignore"):
-        return np.where(log, np.exp(phi), phi) / scale
+        return np.where(code == 1, np.exp(phi), np.where(code == 2, np.sinh(phi), phi)) / scale

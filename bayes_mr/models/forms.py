@@ -15,10 +15,11 @@ at σ ≥ 1/2, where |z| ≤ 1 is invariant (Ikhrouane & Rodellar 2005); below i
 an unloading branch can push z outward and the filter diverges.
 
 Signs: every parameter is positive (log scale) except the classic
-``bouc-wen``'s ``gamma``, which is *sign-free*: estimated on a log scale over
-its default positive range (the thesis's softening loops, Table 3.2, where the
-UKF needs the log coordinate), and carried linearly when the prior range given
-reaches zero or below (``--prior gamma=-2000:2000``, a hardening loop). In the
+``bouc-wen``'s ``gamma``, which is *sign-free*: its default range is ±100 X⁻²,
+carried on the signed-log coordinate asinh(s·γ) (log-like on both signs, so
+the thesis's softening loops, Table 3.2, keep the resolution the UKF needs and
+a hardening loop's negative γ is reachable without a user range); a range
+given with lo > 0 keeps it positive on the log scale. In the
 classic law ṙ = ẋ − β₁|ẋ||r|^{n−1}r −
 γẋ|r|^n the loading branch is ṙ = ẋ(1 − (β₁+γ)|r|^n) and the unloading one
 ṙ = ẋ(1 + (β₁−γ)|r|^n): β₁ > 0 is the dissipation (loop area), while γ of
@@ -79,8 +80,8 @@ BOUC_WEN = Form(
         ParamSpec("k", "N/m", "stiffness (elastic and hysteretic)", 9.0, F_X, (1e-4, 3.0)),
         ParamSpec("beta1", "1/m^n", "Bouc–Wen β₁ (scale relative to X⁻² assumes n ≈ 2)", 2.0, PER_X2, (1e-4, 100.0)),
         # sign-free: γ < 0 hardens the loading branch (the Bouc–Wen benchmark's γ is −1100 /m at n = 1);
-        # log scale over the default positive range, linear when a given range includes γ ≤ 0
-        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ (a range reaching γ ≤ 0 allows a hardening loop)", 1.0, PER_X2,
+        # default range ±100 X⁻² on the signed-log coordinate asinh(s·γ), floor 1e-4 X⁻²
+        ParamSpec("gamma", "1/m^n", "Bouc–Wen γ, either sign (γ < 0: a hardening loop)", 1.0, PER_X2,
                   (1e-4, 100.0), sign_free=True),
         ParamSpec("n", "-", "Bouc–Wen exponent", 2.0, ONE, (1.0, 4.0)),
     ),

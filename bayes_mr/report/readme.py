@@ -95,6 +95,12 @@ def bench_section(r: dict) -> str:
          f"{r['diagnose_mse_ratio']:.3f}", f"{r['diagnose_s']:.0f} s"),
     ]
     rows += _kernel_rows(r)
+    if "boucwen_lsq_s" in r:
+        rows += [(f"least squares, bouc-wen, {r['boucwen_record']} (estimate within "
+                  f"{r['boucwen_lsq_max_z']:.1f} sd of the true values)", f"{r['boucwen_lsq_s']:.0f} s"),
+                 (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, within "
+                  f"{r['boucwen_mcmc_max_z']:.1f} sd{'' if r['boucwen_mcmc_converged'] else ' (NOT converged)'}",
+                  f"{r['boucwen_mcmc_s']:.0f} s")]
     lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
     lines.append("")
     lines.append(f"UKF model: {r['ukf_model']}; {r['threads']} threads. Written by `bayes-mr bench`.")

@@ -1,0 +1,153 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:percent
+# ---
+# %% [markdown]
+# # The Bouc–Wen hysteretic benchmark (Noël & Schoukens 2016)
+#
+# The packaged training record (`load_packaged("boucwen-benchmark")`: a 2 kg mass driven by a
+# 5–150 Hz multisine force through a spring, a damper and a Bouc–Wen element; 5 periods of 8192
+# samples at 750 Hz, the first from rest; displacement measured with ~8 µm band-limited noise) is
+# identified with the five forms of the package and all three estimators (evidence and MSE side by
+# side), the classic `bouc-wen` fit's parameters are given with their credible intervals beside the
+# benchmark's true values, and a forward-chaining cross-validation scores held-out periods of the
+# training record in steady state: train on periods 1…h−1 (from rest, as simulated), predict the
+# whole record from rest and score period h only (the earlier periods are the warm-up).
+#
+# **The benchmark's published test sets (a steady-state multisine period and a sine sweep) are not
+# shipped with the package.** The held-out figures here are held-out periods of the *training*
+# record; the published test RMSEs are listed beside them for orientation, not as a like-for-like
+# comparison.
+#
+# Run: `bayes-mr study boucwen-benchmark [--quick]`. `--quick`: least squares only, one held-out period.
+
+# %%
+from __future__ import annotations
+
+import sys
+import time as _time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bayes_mr import results
+from bayes_mr.comparison import compare, table
+from bayes_mr.data import load_packaged
+from bayes_mr.identify import Identify, LeastSquares, predict, validate
+from bayes_mr.report import figures
+from bayes_mr.report.markdown import markdown_table
+
+#: The benchmark's true system in this package's `bouc-wen` words — the check, never a start or default.
+TRUTH = {"m": 2.0, "c": 10.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0}
+#: Published multisine test-set RMSEs [m] (the test set is not shipped: not comparable one to one).
+PUBLISHED = [
+    ("polynomial nonlinear state space (PNLSS)", "Esfahani et al. 2017", 1.87e-5),
+    ("dynoNet", "Forgione & Piga 2021", 4.52e-5),
+    ("nonlinear FIR local model network", "Belz et al. 2017", 1.63e-4),
+]
+FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen", "spencer")
+PERIOD = 8192  # samples per multisine period
+
+
+def _period_time(rec) -> float:
+    return PERIOD * float(rec.attrs["dt"])
+
+
+def cross_validation(rec, held_out: tuple[int, ...], seed: int) -> tuple[list[dict], dict]:
+    """Forward-chaining CV of ``bouc-wen`` by least squares; rows per held-out period and the last fit."""
+    rows, last = [], None
+    for h in held_out:
+        train = rec.isel(time=slice(0, (h - 1) * PERIOD))
+        train.attrs["source"] = f"boucwen-benchmark periods 1-{h - 1}"
+        t0 = _time.perf_counter()
+        idata = Identify("bouc-wen", LeastSquares()).fit(train, seed=seed, progress=False)
+        wall = _time.perf_counter() - t0
+        scored = rec.isel(time=slice(0, h * PERIOD))
+        v = validate(idata, scored, warmup=(h - 1) * _period_time(rec))
+        rows.append({"trained on periods": f"1-{h - 1}", "held-out period": h,
+                     "held-out RMSE [m]": v["rmse"]["displacement"], "lsq wall [s]": round(wall, 1)})
+        last = idata
+    return rows, {"idata": last, "held_out": held_out[-1]}
+
+
+def parameter_table(fits: dict) -> pd.DataFrame:
+    """``bouc-wen`` parameters per engine: estimate, sd, 95 % interval, |z| against the truth."""
+    rows = []
+    for engine, idata in fits.items():
+        post = idata.posterior
+        s = results.summary_of(idata).to_dict()
+        for name, true in TRUTH.items():
+            if name not in s["params"]:
+                continue
+            draws = post[name].values.ravel()
+            lo, hi = np.percentile(draws, [2.5, 97.5]) if draws.size > 1 else (np.nan, np.nan)
+            est, sd = s["params"][name], s["params_sd"][name]
+            rows.append({"engine": engine, "parameter": name, "true": true, "estimate": est, "sd": sd,
+                         "2.5 %": lo, "97.5 %": hi, "|z|": abs(est - true) / sd if sd > 0 else np.inf})
+    return pd.DataFrame(rows)
+
+
+def _figures(fig_dir: Path, rec, idata, held_out: int) -> None:
+    """Output and error spectra of the held-out period; the hysteresis loop k·r against x."""
+    point = {**results.summary_of(idata).extra.get("fixed", {}), **results.point_of(idata)}
+    sl = slice((held_out - 1) * PERIOD, held_out * PERIOD)
+    pred = predict("bouc-wen", rec.isel(time=slice(0, held_out * PERIOD)), point)
+    y = rec["displacement"].values[sl]
+    e = y - pred["displacement"][sl]
+    f = np.fft.rfftfreq(PERIOD, float(rec.attrs["dt"]))
+    db = {name: 20 * np.log10(np.abs(np.fft.rfft(v)) / PERIOD + 1e-30)
+          for name, v in (("measured output", y), ("simulation error", e))}
+    fig, ax = figures.subplots(figsize=(7.0, 3.6))
+    for name, v in db.items():
+        ax.plot(f[1:], v[1:], lw=0.6, label=name)
+    ax.set(xlabel="frequency [Hz]", ylabel="amplitude [dB re 1 m]", xlim=(0, f[-1]),
+           title=f"Held-out period {held_out}: output and error spectra")
+    ax.legend()
+    figures.save(fig, fig_dir / "spectra.png")
+    x = pred["displacement"][sl]
+    figures.save(figures.hysteresis(x, {"identified k·r": pred["force"][sl]},
+                                    title=f"Hysteresis loop k·r against x, period {held_out}"),
+                 fig_dir / "hysteresis.png")
+
+
+def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool = False, seed: int = 0) -> dict:
+    """Run the study; write ``report.md``, tables (CSV) and figures; return the summary."""
+    out = Path(out_dir)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    rec = load_packaged("boucwen-benchmark")
+    engines = ("lsq",) if quick else ("lsq", "mcmc", "ukf")
+    cmp = compare(rec, FORMS, engines=engines, seed=seed, progress=False)
+    forms = table(cmp)
+    forms.to_csv(out / "forms.csv", index=False)
+    fits = {e: cmp["idata"][("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp["idata"]}
+    params = parameter_table(fits)
+    params.to_csv(out / "parameters.csv", index=False)
+    cv_rows, last = cross_validation(rec, (5,) if quick else (3, 4, 5), seed)
+    cv = pd.DataFrame(cv_rows)
+    cv.to_csv(out / "cross_validation.csv", index=False)
+    _figures(out / "figures", rec, last["idata"], last["held_out"])
+    ours = cv_rows[-1]["held-out RMSE [m]"]
+    lit = pd.DataFrame([{"method": m, "reference": r, "multisine test RMSE [m]": v, "scored on": "published test set"}
+                        for m, r, v in PUBLISHED]
+                       + [{"method": "bouc-wen, least squares (this package)", "reference": "this study",
+                           "multisine test RMSE [m]": ours, "scored on": "held-out period 5 of the training record"}])
+    lines = ["# The Bouc–Wen hysteretic benchmark", "",
+             "The benchmark's published test sets are **not shipped**; every held-out figure below is a held-out "
+             "period of the training record.", "",
+             f"## Five forms × {', '.join(engines)}", "", markdown_table(forms), "",
+             f"Selected by evidence: **{cmp['selected']}**.", "",
+             "## `bouc-wen` parameters against the benchmark's true values", "", markdown_table(params), "",
+             "## Cross-validation on held-out periods (steady state)", "", markdown_table(cv), "",
+             "## Published test RMSEs beside ours", "", markdown_table(lit), "",
+             "![spectra](figures/spectra.png) ![loop](figures/hysteresis.png)"]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return {"report": str(out / "report.md"), "selected": cmp["selected"],
+            "bayes_factors": cmp["bayes_factors"], "held_out_rmse": ours,
+            "max_abs_z": {e: float(params[params.engine == e]["|z|"].max()) for e in fits},
+            "cross_validation": cv_rows}
+
+
+if __name__ == "__main__":
+    print(main(quick="--quick" in sys.argv))
