@@ -181,6 +181,9 @@ def _job_parsers(sub) -> None:
                                    "section with scripts/update_readme.py).")
     p.add_argument("--json", metavar="OUT.json", help="write the figures here (default: stdout)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--boucwen", action="store_true",
+                   help="also time bouc-wen lsq and MCMC on the packaged Bouc–Wen benchmark record (40 960 samples, "
+                        "band-limited inputs; long: not part of make bench)")
     _no_readme_flag(p)
 
 
