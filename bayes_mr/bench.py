@@ -225,21 +225,27 @@ def training_100(seed: int = 0) -> dict:
     }
 
 
-def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> dict:
-    """Wall times of least squares and of an emcee posterior for dahl on a 25 s record."""
+def _lsq_then_mcmc(lik: OutputError, seed: int):
+    """Least squares, then an emcee posterior started from it: (lsq result, its wall time [s], chain, its wall time [s])."""
     from .inference.lsq import fit_lsq
     from .inference.mcmc import MCMCSettings, fit_mcmc
-    from .signals import make_signal
 
-    sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=20.0, seed=seed)
-    rec = _frame_record("dahl", sig, seed=seed, source="bench: blwn 25 s")
-    lik = OutputError("dahl", rec)
     t0 = _time.perf_counter()
     res = fit_lsq(lik)
     lsq_s = _time.perf_counter() - t0
     t0 = _time.perf_counter()
     chain = fit_mcmc(lik, lsq=res, settings=MCMCSettings(seed=seed, progress=False))
-    mcmc_s = _time.perf_counter() - t0
+    return res, lsq_s, chain, _time.perf_counter() - t0
+
+
+def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> dict:
+    """Wall times of least squares and of an emcee posterior for dahl on a 25 s record."""
+    from .signals import make_signal
+
+    sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=20.0, seed=seed)
+    rec = _frame_record("dahl", sig, seed=seed, source="bench: blwn 25 s")
+    lik = OutputError("dahl", rec)
+    res, lsq_s, chain, mcmc_s = _lsq_then_mcmc(lik, seed)
     return {"lsq_s": lsq_s, "mcmc_s": mcmc_s, "mcmc_steps": chain.n_steps, "mcmc_walkers": chain.n_walkers,
             "mcmc_converged": chain.converged, "mcmc_tau_max": float(chain.tau.max()),
             "mcmc_rhat_max": float(chain.rhat.max()), "mcmc_record": f"dahl, {duration:g} s at {fs:g} Hz",
@@ -255,17 +261,10 @@ def boucwen_benchmark_timing(seed: int = 0) -> dict:
     parameters (the benchmark's published system; a check, never a start).
     """
     from .data import load_packaged
-    from .inference.lsq import fit_lsq
-    from .inference.mcmc import MCMCSettings, fit_mcmc
 
     truth = {"m": 2.0, "c": 10.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0}
     lik = OutputError("bouc-wen", load_packaged("boucwen-benchmark"))
-    t0 = _time.perf_counter()
-    res = fit_lsq(lik)
-    lsq_s = _time.perf_counter() - t0
-    t0 = _time.perf_counter()
-    chain = fit_mcmc(lik, lsq=res, settings=MCMCSettings(seed=seed, progress=False))
-    mcmc_s = _time.perf_counter() - t0
+    res, lsq_s, chain, mcmc_s = _lsq_then_mcmc(lik, seed)
     p = lik.n_params
     draws = lik.par.coords.to_theta(chain.chain[chain.burn:, :, :p].reshape(-1, p))
     z_mcmc = np.abs(draws.mean(axis=0) - [truth[n] for n in lik.names]) / draws.std(axis=0)
