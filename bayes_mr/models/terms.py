@@ -31,7 +31,7 @@ over the basis's scale).
 
 from __future__ import annotations
 
-from . import kernel, term_kernel
+from . import term_kernel
 from .effects import Effect
 from .params import ParamSpec
 
