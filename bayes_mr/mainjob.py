@@ -86,6 +86,9 @@ class Budget:
         Latin-hypercube priors per index of dispersion.
     ukf_taus : tuple of float
         Indices of dispersion (thesis: ten).
+    input_interp : {"linear", "bandlimited"} or None
+        Inputs between samples (None: ``auto``). ``make run`` keeps linear, as every earlier run: ``auto`` would
+        read its 250 Hz record band-limited (S = 11, measured), several times the run's budget.
     noise : {"iid", "ar"}
         Residual model of the comparison's likelihood (``Identify.noise``).
         The other one is also fitted by least squares, so the report says how
@@ -109,6 +112,7 @@ class Budget:
     ukf_taus: tuple[float, ...] = TAUS
     diagnose_s: float | None = 4.0
     noise: str = "iid"
+    input_interp: str | None = "linear"
 
 
 #: ``make run``: the whole trimmed record at ~250 Hz (the force's content lies below ~50 Hz; the
@@ -141,6 +145,8 @@ def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Datase
     trimmed, trim = trim_excited(rec)
     factor = max(1, int(round(float(trimmed.attrs["fs"]) / budget.fs)))
     rec = decimate_record(trimmed, factor) if factor > 1 else trimmed
+    if budget.input_interp is not None:
+        rec.attrs["input_interp"] = budget.input_interp  # every fit and prediction reads the record's attribute
     if budget.duration_s is not None:
         rec = rec.isel(time=slice(0, int(budget.duration_s * float(rec.attrs["fs"]))))
     n = rec.sizes["time"]
@@ -155,7 +161,7 @@ def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Datase
         "source": str(rec.attrs.get("source", "")),
         "masked": int((~rec["valid"].values.astype(bool)).sum()),
         "trim": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in trim.items()},
-        "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n),
+        "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n), "input_interp": budget.input_interp,
         "duration_s": float(n / rec.attrs["fs"]),
         "part_a_s": float(cut / rec.attrs["fs"]), "part_b_s": float((n - cut) / rec.attrs["fs"]),
     }

@@ -169,7 +169,8 @@ def headline(summary: dict) -> list[str]:
     lines = []
     rec = summary["record"]
     lines.append(f"Record: {rec['source']} — {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz after trimming and "
-                 f"decimation by {rec['decimation']}; {rec['masked']} samples masked by quality control. "
+                 f"decimation by {rec['decimation']} (inputs {rec.get('input_interp') or 'auto'} between samples); "
+                 f"{rec['masked']} samples masked by quality control. "
                  f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s.")
     if sel:
         bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
