@@ -27,6 +27,7 @@ import xarray as xr
 
 from ..likelihood import OutputError
 from ..models import terms as lib
+from ..models.kernel import N_TERMS
 from .fits import Fit, record_mse, refit
 from .library import Proposal, library, propose
 from .screen import THRESHOLD, effect_starts, score
@@ -166,7 +167,7 @@ def search_terms(record: xr.Dataset, fit: Fit, *, seed: int = 0, threshold: floa
     current = _refit_on(train, fit)
     tried, seen, dropped = [], [], set()
     # forward: propose on the current model's residual, keep the first proposal that passes, propose again
-    while len(lib.term_effects(current.model.effects)) < lib.kernel.N_TERMS:
+    while len(lib.term_effects(current.model.effects)) < N_TERMS:
         names = [t for t in library(current.model, record) if t not in dropped]
         proposals, info = propose(current.lik, current.phi, current.result.sigma, current.lik.valid, names)
         seen.append({"model": current.name, **info, "proposed": [p.to_dict() for p in proposals]})
