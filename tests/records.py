@@ -182,3 +182,37 @@ def masked_structure_record() -> xr.Dataset:
     valid[50:80] = False
     rec["valid"] = ("time", valid)
     return rec
+
+
+# --- diagnose cases: which effect was hidden, and whether diagnose named it ---------------------
+
+def effect_cases(structure: dict, device: dict, default: list[tuple]) -> list[tuple]:
+    """(kind, effect, magnitude index, seed) of every effect of the magnitude tables, two magnitudes and two
+    seeds each, less the ``default`` cases (the slow matrix beside the default suite's cases)."""
+    full = [(k, e, m, s) for k, table in (("structure", structure), ("device", device))
+            for e in table for m in (0, 1) for s in (0, 1)]
+    return [c for c in full if c not in default]
+
+
+def case_id(case: tuple) -> str:
+    """pytest id of an :func:`effect_cases` case."""
+    return f"{case[0]}-{case[1]}-m{case[2]}-s{case[3]}"
+
+
+def naming_failures(out: dict, effect: str, threshold: float, *, top_first: bool = True) -> list[str]:
+    """What is wrong with a diagnosis that should name ``effect`` and gain by it (empty: nothing).
+
+    Named as the cause, the extended model holds it, MSE falls, ln Z rises, and the top candidate's score
+    passes ``threshold`` (with ``top_first``, the top candidate is ``effect`` itself).
+    """
+    causes = [(c["name"], c["score"]) for c in out["causes"]]
+    checks = {
+        f"cause {out['cause']} is not {effect} ({causes})": out["cause"] == effect,
+        f"MSE ratio {out['gain']['mse_ratio']} ≥ 1": out["gain"]["mse_ratio"] < 1.0,
+        f"Δ ln Z {out['gain']['delta_log_evidence']} ≤ 0": out["gain"]["delta_log_evidence"] > 0,
+        f"extended model {out['extended']['model']} lacks {effect}": effect in out["extended"]["model"].split("+"),
+        f"top score {causes[0] if causes else None} ≤ {threshold}": bool(causes) and causes[0][1] > threshold,
+    }
+    if top_first:
+        checks[f"top candidate is not {effect} ({causes[:2]})"] = bool(causes) and causes[0][0] == effect
+    return [msg for msg, ok in checks.items() if not ok]

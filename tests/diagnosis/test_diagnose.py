@@ -22,7 +22,7 @@ from bayes_mr.stats import integrated_time
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import synthesize
-from records import signal_record
+from records import case_id, effect_cases, naming_failures, signal_record
 
 MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
 VOCABULARY = set(EFFECTS) | {NONE}
@@ -91,15 +91,6 @@ def effect_case(kind, effect, magnitude, seed):
     return simulated_record(kind, "dahl", {effect: table[effect][magnitude]}, seed=seed,
                             signal="amp" if effect == "small_amplitude_regime" else "blwn",
                             voltage=effect == "voltage_dependence")
-
-
-def check_named(out, effect):
-    assert out["cause"] == effect, [(c["name"], c["score"]) for c in out["causes"]]
-    assert out["gain"]["mse_ratio"] < 1.0
-    assert out["gain"]["delta_log_evidence"] > 0
-    assert effect in out["extended"]["model"].split("+")
-    top = out["causes"][0]
-    assert top["name"] == effect and top["score"] > THRESHOLD
 
 
 # --- residual tools ----------------------------------------------------------------------
@@ -188,28 +179,22 @@ DEFAULT = [
     ("device", "low_velocity_rolloff", 0, 1),
     ("device", "voltage_dependence", 1, 0),
 ]
-FULL = [(k, e, m, s) for k, table in (("structure", STRUCTURE_MAGNITUDES), ("device", DEVICE_MAGNITUDES))
-        for e in table for m in (0, 1) for s in (0, 1)]
-FULL = [c for c in FULL if c not in DEFAULT]
+FULL = effect_cases(STRUCTURE_MAGNITUDES, DEVICE_MAGNITUDES, DEFAULT)
 
 
-def _id(case):
-    return f"{case[0]}-{case[1]}-m{case[2]}-s{case[3]}"
-
-
-@pytest.mark.parametrize("case", DEFAULT, ids=_id)
+@pytest.mark.parametrize("case", DEFAULT, ids=case_id)
 def test_hidden_effect_is_named_and_fixed(case):
     kind, effect, magnitude, seed = case
     out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False)
-    check_named(out, effect)
+    assert not naming_failures(out, effect, THRESHOLD)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", FULL, ids=_id)
+@pytest.mark.parametrize("case", FULL, ids=case_id)
 def test_hidden_effect_is_named_and_fixed_full_matrix(case):
     kind, effect, magnitude, seed = case
     out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False)
-    check_named(out, effect)
+    assert not naming_failures(out, effect, THRESHOLD)
 
 
 def test_delay_of_the_displacement_channel_names_that_channel():
@@ -217,7 +202,7 @@ def test_delay_of_the_displacement_channel_names_that_channel():
     rec = signal_record(model, "structure", {"delay": 0.006}, duration=6.0, fs=500.0, amplitude=3e-3, fmax=10.0,
                         signal_seed=4, mass=MASS, noise=0.01, seed=81)
     out = diagnose(rec, "dahl", progress=False)
-    check_named(out, "sensor_delay")
+    assert not naming_failures(out, "sensor_delay", THRESHOLD)
     assert out["extended"]["options"]["sensor_delay"]["channel"] == "displacement"
 
 
