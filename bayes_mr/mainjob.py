@@ -46,6 +46,7 @@ from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
 from .identify import UKF, Emcee, Identify, LeastSquares, predict
+from .mainjob_context import noise_sensitivity, published_spencer
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -54,11 +55,6 @@ from .models import FORMS, get_model
 from .progress import say as progress_say
 from .report.run import report_markdown, run_figures, spencer_table
 from .scores import score
-
-#: Where the published Spencer (1997) parameters come from (issue #6; a secondary source).
-SPENCER_SOURCE = ("Spencer, Dyke, Sain & Carlson (1997), J. Eng. Mech. 123(3), prototype damper, "
-                  "as quoted in a secondary source (not checked against the paper); converted to SI")
-
 
 @dataclass(frozen=True)
 class Budget:
@@ -121,11 +117,15 @@ class Budget:
 #: part A, measured; normalized Bouc–Wen costs ~5× dahl per simulation and Spencer ~80×). 1000 steps
 #: are ~30–50 integrated autocorrelation times here, short of the ≥ 50 τ and R-hat < 1.01 the package
 #: asks of a posterior (~3000 steps would be, measured: 10 more minutes): the report flags them NOT
-#: converged rather than hide it. Selection is by the Laplace evidence every form has; a
+#: converged rather than hide it. Each posterior also stops at 150 s (``max_seconds``): classic
+#: Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading
+#: branch and a very stiff unloading one, MSE 941 against 966 with γ > 0), where every evaluation needs
+#: tens of sub-steps per sample and 1000 steps ran past 13 minutes. Selection is by the Laplace evidence every form has; a
 #: thermodynamic-integration ladder per form (several minutes each on this record) does not fit —
 #: ``bayes-mr compare --engines mcmc`` runs it.
 FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=5,
-              mcmc=MCMCSettings(max_steps=1000, check_every=250), evidence="laplace", ukf_lhs=2)
+              mcmc=MCMCSettings(max_steps=1000, max_seconds=150.0, check_every=250), evidence="laplace",
+              ukf_lhs=2)
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
                mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
@@ -204,43 +204,6 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
             "evidence_engine": eng, "mcmc_skipped": skipped, "idata": fits}
 
 
-def _laplace_choice(rows: list[dict]) -> dict:
-    """Selected model and ln Bayes factors from the least-squares (Laplace) rows."""
-    ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == "lsq" and "error" not in r}
-    if not ln_z:
-        return {"selected": None, "log_evidence": {}, "bayes_factors": {}}
-    sel = max(ln_z, key=ln_z.get)
-    return {"selected": sel, "log_evidence": ln_z, "bayes_factors": {m: ln_z[sel] - z for m, z in ln_z.items()}}
-
-
-def noise_sensitivity(part_a, budget: Budget, rows: list[dict], *, seed: int, say) -> dict:
-    """The model choice under the other residual model (least squares, Laplace evidence).
-
-    The comparison's own likelihood treats the residual as ``budget.noise``;
-    here every form is refitted with the other one (``iid`` ↔ ``ar``), so the
-    report can say how the selection and the ln Bayes factors move when the
-    residual's correlation in time is (or is not) modelled (issue 14: an iid
-    likelihood's ln BF grows with the sampling rate, an AR one with the
-    information in the record).
-
-    Returns
-    -------
-    dict
-        ``{noise: {"selected", "log_evidence", "bayes_factors", "n_eff"}}`` for
-        both residual models, each from lsq rows on part A.
-    """
-    other = "ar" if budget.noise == "iid" else "iid"
-    alt_rows = []
-    for form in budget.forms:
-        say(f"{form}: least squares under the {other} residual model")
-        alt_rows += compare(part_a, [form], engines=["lsq"], seed=seed, progress=say, noise=other)["rows"]
-    out = {}
-    for noise, rs in ((budget.noise, rows), (other, alt_rows)):
-        out[noise] = _laplace_choice(rs)
-        out[noise]["n_eff"] = {r["model"]: r.get("n_eff") for r in rs if r["engine"] == "lsq" and "error" not in r}
-    return out
-
-
 #: The forms the thesis identified on its shake table (Spencer's model is a device model with 14 parameters).
 THESIS_FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
 
@@ -255,26 +218,6 @@ def _best_thesis_form(comp: dict) -> str | None:
 def _best_by_validation(rows: list[dict]) -> dict | None:
     ok = [r for r in rows if r.get("validation", {}).get("force_nrmse") is not None]
     return min(ok, key=lambda r: r["validation"]["force_nrmse"]) if ok else None
-
-
-def published_spencer(part_a, part_b, rows: list[dict]) -> dict:
-    """The published Spencer (1997) parameters on A and B, next to the identified ones."""
-    model = get_model("spencer")
-    kind = part_b.attrs["kind"]
-    names = model.param_names(kind)
-    published = dict(zip(names, model.theta(kind, {})))
-    out = {"source": SPENCER_SOURCE, "params": published}
-    for label, rec in (("part_a", part_a), ("part_b", part_b)):
-        try:
-            pred = predict(model, rec, published)
-            s = score(rec, pred)
-            out[label] = {"force_nrmse": s["force_nrmse"], "mse": s["mse"], "force_errors": s["force_errors"]}
-        except ValueError as exc:
-            out[label] = {"error": str(exc)}
-    ident = next((r for r in rows if r["model"] == "spencer" and r["engine"] == "lsq" and "error" not in r), None)
-    if ident is not None:
-        out["identified"] = {"engine": "lsq", "params": ident["params"], "params_sd": ident["params_sd"]}
-    return out
 
 
 def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, out_dir: Path, say) -> dict:
@@ -391,7 +334,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     noise : {"iid", "ar"}, optional
         Residual model of the comparison (default: the budget's, ``iid``);
         the other one is fitted by least squares beside it
-        (:func:`noise_sensitivity`).
+        (:func:`~bayes_mr.mainjob_context.noise_sensitivity`).
     stages : tuple of str
         Stages after the comparison (which always runs): ``spencer``,
         ``diagnose``, ``shake_table``.
@@ -414,8 +357,8 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     comp = _timed(timing, "compare", compare_forms, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
     selected = comp["selected"]
     say(f"selected by {comp['evidence_route']} evidence: {selected}")
-    sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget, comp["rows"],
-                         seed=seed, say=say)
+    sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget.forms, budget.noise,
+                         comp["rows"], seed=seed, say=say)
     tab = table(comp)
     tab.to_csv(out_dir / "compare.csv", index=False)
 

@@ -4,16 +4,19 @@ The rule (see :mod:`bayes_mr.inference.mcmc`): a pilot τ₀ from the second
 half of the chain, burn-in ⌈``burn_tau_multiple`` · τ₀⌉ (at most half), and
 converged when the chain after burn-in is ``min_tau_multiple`` times its
 longest integrated time *and* every coordinate's rank-normalised split R-hat
-(walkers as chains) is below ``rhat_max``.
+(walkers as chains) is below ``rhat_max``. :func:`run_until_converged` drives
+a sampler by that rule, within ``max_steps`` and an optional wall-time budget.
 """
 
 from __future__ import annotations
 
 import math
+import time
 import warnings
 
 import numpy as np
 
+from ..progress import bar as progress_bar
 from ..stats import integrated_times
 
 
@@ -64,3 +67,61 @@ def convergence_check(chain: np.ndarray, settings) -> dict:
     long_enough = bool(np.all(np.isfinite(tau))) and post.shape[0] >= settings.min_tau_multiple * float(np.max(tau))
     converged = bool(long_enough and np.all(rhat < settings.rhat_max))
     return {"burn": burn, "tau": tau, "rhat": rhat, "ess": ess, "converged": converged}
+
+
+def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict, list[dict]]:
+    """Advance an emcee sampler in blocks of ``check_every`` steps until the rule, ``max_steps`` or the budget.
+
+    Checks fall at multiples of ``check_every`` counted from the chain's
+    start (stored steps included), so a resumed run takes the decisions of an
+    uninterrupted one. A run past ``settings.max_seconds`` stops after the
+    current step and is checked there (flagged not converged).
+
+    Parameters
+    ----------
+    sampler : emcee.EnsembleSampler
+    state : emcee.State
+        Where the chain continues.
+    settings : MCMCSettings
+    resuming : bool
+        The state comes from a checkpoint (emcee skips its initial-state check).
+
+    Returns
+    -------
+    diag : dict
+        The last :func:`convergence_check`, with ``stopped`` (``"converged"``,
+        ``"max_steps"`` or ``"max_seconds"``).
+    history : list of dict
+        Each check: step, burn, tau_max, rhat_max.
+    """
+    t0 = time.perf_counter()
+    budget = math.inf if settings.max_seconds is None else float(settings.max_seconds)
+    it = int(sampler.iteration)
+    history: list[dict] = []
+    bar = progress_bar(settings.max_steps, "emcee", unit="step", enabled=settings.progress, initial=it)
+    try:
+        while True:
+            out_of_time = time.perf_counter() - t0 > budget
+            if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps or out_of_time):
+                diag = convergence_check(sampler.get_chain(), settings)
+                history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
+                                "rhat_max": float(diag["rhat"].max())})
+                bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
+                                N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
+                                rhat=f"{diag['rhat'].max():.3f}")
+                if diag["converged"] or it >= settings.max_steps or out_of_time:
+                    diag["stopped"] = ("converged" if diag["converged"]
+                                       else "max_steps" if it >= settings.max_steps else "max_seconds")
+                    diag["converged"] = diag["converged"] and not out_of_time
+                    break
+            target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
+            # one step at a time through the generator so the bar moves; the backend saves every step
+            for state in sampler.sample(state, iterations=target - it, skip_initial_state_check=resuming):
+                bar.update(1)
+                it += 1
+                resuming = False
+                if time.perf_counter() - t0 > budget:
+                    break
+    finally:
+        bar.close()
+    return diag, history

@@ -50,9 +50,8 @@ from pathlib import Path
 import emcee
 import numpy as np
 
-from ..progress import bar as progress_bar
 from .checkpoint import open_backend, run_seeds
-from .convergence import convergence_check
+from .convergence import run_until_converged
 from .moves import MOVES
 
 
@@ -78,6 +77,11 @@ class MCMCSettings:
         Every coordinate's rank-normalised split R-hat must be below this.
     max_steps : int
         Hard limit on steps (the result is then flagged not converged).
+    max_seconds : float or None
+        Wall-time budget of the call [s]: the run stops after the step that
+        exceeds it, is checked there and flagged not converged (``stopped`` says
+        why). A budgeted run is a function of the machine's speed, so it is not
+        reproducible step for step; None (default) has no budget.
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
@@ -97,6 +101,7 @@ class MCMCSettings:
     burn_tau_multiple: float = 5.0
     rhat_max: float = 1.01
     max_steps: int = 20000
+    max_seconds: float | None = None
     check_every: int = 250
     moves: tuple[tuple[str, float], ...] = (("de", 0.8), ("snooker", 0.2))
     seed: int | np.random.SeedSequence = 0
@@ -148,7 +153,9 @@ class MCMCResult:
     acceptance : ndarray (n_walkers,)
         Acceptance fraction of each walker.
     converged : bool
-        The stopping rule was met (else ``max_steps`` stopped the run).
+        The stopping rule was met.
+    stopped : str
+        Why the run ended: ``"converged"``, ``"max_steps"`` or ``"max_seconds"``.
     wall_s : float
         Wall time of this call (a resumed run counts only its own part) [s].
     seed_entropy : str
@@ -170,6 +177,7 @@ class MCMCResult:
     converged: bool
     wall_s: float
     seed_entropy: str
+    stopped: str = "converged"
     names: tuple[str, ...] = ()
     history: list = field(default_factory=list)
 
@@ -311,7 +319,7 @@ def sample(
     else:
         coords, lp0 = _start(log_prob, x0_center, x0_cov, n_walkers, init_rng, initial)
         state = emcee.State(coords, log_prob=lp0, random_state=move_state)
-    diag, history = _run_until_converged(sampler, state, settings, resuming)
+    diag, history = run_until_converged(sampler, state, settings, resuming)
     tau = diag["tau"]
     return MCMCResult(
         chain=np.array(sampler.get_chain()),
@@ -323,6 +331,7 @@ def sample(
         ess=diag["ess"],
         acceptance=np.array(sampler.acceptance_fraction),
         converged=bool(diag["converged"]),
+        stopped=diag["stopped"],
         wall_s=_time.perf_counter() - t0,
         seed_entropy=entropy,
         names=names,
@@ -339,42 +348,6 @@ def _start(log_prob, x0_center, x0_cov, n_walkers, rng, initial) -> tuple[np.nda
     if not np.all(np.isfinite(lp0)):
         raise ValueError(f"{int(np.sum(~np.isfinite(lp0)))} initial walkers have no finite log-density")
     return coords, lp0
-
-
-def _run_until_converged(sampler, state, settings: MCMCSettings, resuming: bool) -> tuple[dict, list[dict]]:
-    """Advance the sampler in blocks of ``check_every`` steps until the stopping rule or ``max_steps``.
-
-    Checks fall at multiples of ``check_every`` counted from the chain's
-    start (stored steps included), so a resumed run takes the decisions of an
-    uninterrupted one. Returns the last :func:`convergence_check` and the
-    history of checks (step, burn, tau_max, rhat_max).
-    """
-    it = int(sampler.iteration)
-    history: list[dict] = []
-    diag = None
-    bar = progress_bar(settings.max_steps, "emcee", unit="step", enabled=settings.progress, initial=it)
-    try:
-        while True:
-            if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps):
-                diag = convergence_check(sampler.get_chain(), settings)
-                history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
-                                "rhat_max": float(diag["rhat"].max())})
-                bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
-                                N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
-                                rhat=f"{diag['rhat'].max():.3f}")
-                if diag["converged"] or it >= settings.max_steps:
-                    break
-            target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
-            # one step at a time through the generator so the bar moves; the backend saves every step
-            steps = sampler.sample(state, iterations=target - it, skip_initial_state_check=resuming)
-            for new_state in steps:
-                bar.update(1)
-            state = new_state
-            it = target
-            resuming = False
-    finally:
-        bar.close()
-    return diag, history
 
 
 # --- the package's posterior ----------------------------------------------------------

@@ -40,7 +40,7 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     best : dict or None
         The row with the lowest force NRMSE on part B.
     spencer : dict
-        :func:`bayes_mr.mainjob.published_spencer` (``params`` [SI]).
+        :func:`bayes_mr.mainjob_context.published_spencer` (``params`` [SI]).
     vst : dict or None
         :func:`bayes_mr.mainjob.shake_table` with its private arrays (``_vst_b``, ``_force_b``).
 
@@ -180,7 +180,8 @@ def headline(summary: dict) -> list[str]:
     lines += _noise_lines(summary)
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
     if chains:
-        unconverged = [r["model"] for r in chains if not r.get("converged")]
+        why = {"max_steps": "step limit", "max_seconds": "time limit"}
+        unconverged = [f"{r['model']} ({why.get(r.get('stopped'), 'budget')})" for r in chains if not r.get("converged")]
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
                      f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
                      f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
@@ -236,7 +237,7 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
     if conv:
         out += ["", "MCMC diagnostics: " + "; ".join(
             f"{r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
-            f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (budget)'}"
+            f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (' + str(r.get('stopped', 'budget')) + ')'}"
             for r in conv) + "."]
     out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
             "![force–velocity by command](force_velocity_part_b.png)", "",

@@ -99,6 +99,27 @@ def test_same_seed_gives_the_same_chain_bit_for_bit():
     assert not np.array_equal(a.chain, c.chain)
 
 
+def test_a_wall_time_budget_stops_the_run_and_says_so():
+    """A slow density (5 ms a call) with a 0.3-s budget: the run stops within a step or two of the
+    budget, long before ``max_steps``, is checked there and is flagged not converged, "max_seconds"."""
+    import time
+
+    mu, C, _, fast = correlated_gaussian(3, seed=2)
+
+    def slow(X):
+        time.sleep(0.005)
+        return fast(X)
+
+    t0 = time.perf_counter()
+    res = sample(slow, mu, C, MCMCSettings(seed=1, max_steps=5000, max_seconds=0.3, progress=False))
+    assert time.perf_counter() - t0 < 5.0
+    assert 1 <= res.n_steps < 250
+    assert not res.converged and res.stopped == "max_seconds"
+    assert res.history[-1]["step"] == res.n_steps
+    free = sample(fast, mu, C, MCMCSettings(seed=1, progress=False))
+    assert free.converged and free.stopped == "converged"
+
+
 class Interrupt(Exception):
     pass
 
