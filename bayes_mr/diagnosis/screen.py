@@ -239,7 +239,8 @@ def effect_ranges(model: Model, record: xr.Dataset, scales=None) -> dict[str, tu
 def _null(name: str, lo: float, hi: float, default: float) -> float:
     """The value that switches an effect's parameter off (or nearest inside its box)."""
     off = {"f0": 0.0, "drift": 0.0, "asym": 0.0, "r_s": 1.0, "c_s": hi, "delay": lo, "k3": lo,
-           "a_v": lo, "c_v": lo, "u_s": hi, "tau_c": lo, "c_p": lo, "F_st": lo, "m_e": lo}
+           "a_v": lo, "c_v": lo, "u_s": hi, "tau_c": lo, "c_p": lo, "F_st": lo, "m_e": lo,
+           "r_d": 1.0}
     if name in off:
         return float(np.clip(off[name], lo, hi))
     if name == "x_s":

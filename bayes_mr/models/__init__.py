@@ -6,6 +6,7 @@ from .effects import (
     COMMAND_SATURATION,
     CUBIC_STIFFNESS,
     EFFECTS,
+    FIELD_DECAY,
     FIELD_DYNAMICS,
     FORCE_OFFSET,
     INERTIA,
@@ -25,7 +26,7 @@ from .params import Coordinates, ParamSpec, Scales
 
 __all__ = [
     "ASYMMETRY", "BOUC_WEN", "COMMAND_SATURATION", "CUBIC_STIFFNESS", "Coordinates", "DAHL", "EFFECTS", "Effect",
-    "FIELD_DYNAMICS", "FORCE_OFFSET", "FORMS", "Form", "INERTIA", "KINDS", "LOW_VELOCITY_ROLLOFF", "LUGRE", "Model",
+    "FIELD_DECAY", "FIELD_DYNAMICS", "FORCE_OFFSET", "FORMS", "Form", "INERTIA", "KINDS", "LOW_VELOCITY_ROLLOFF", "LUGRE", "Model",
     "NONE", "NORMALIZED_BOUC_WEN", "ParamSpec", "SENSOR_DELAY", "SHEAR_THINNING", "SMALL_AMPLITUDE_REGIME", "SPENCER",
     "STIFFNESS_DRIFT", "STRIBECK_FRICTION", "Scales", "VOLTAGE_DEPENDENCE", "get_model",
 ]

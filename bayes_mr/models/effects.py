@@ -22,8 +22,9 @@ parameters (and sometimes a state) to the model. The kernel applies them as:
 Issue 15 added effects the MR-damper literature knows (each cited in its
 constant's comment; equations in ``docs/CONTRACT.md``):
 
-* ``command_saturation`` — the command's effect on the yield force saturates:
-  the filtered command u enters the hysteretic strength as u_s·tanh(u/u_s);
+* ``command_saturation`` — the field saturates with the command: the filtered
+  command u enters every field-dependent coefficient (the hysteretic strength,
+  and spencer's c0, c1 or ``voltage_dependence``'s c_v) as u_s·tanh(u/u_s);
 * ``field_dynamics`` — a second lag between command and field (coil current
   i̇ = (v − i)/τ_c feeding the existing field lag);
 * ``shear_thinning`` — Herschel–Bulkley post-yield viscous force
@@ -31,9 +32,11 @@ constant's comment; equations in ``docs/CONTRACT.md``):
 * ``stribeck_friction`` — the Stribeck excess of seal friction, F_st·e^{−(ẋ/v_s)²}·tanh(ẋ/(ε·v_s))
   (its Coulomb level is the form's own friction or yield force);
 * ``inertia`` — piston and fluid inertia m_e·ẍ in the force a device test
-  measures (device tests only).
+  measures (device tests only);
+* ``field_decay`` — the field decays at its own rate: the command-to-field lag
+  runs at r_d·η while the field's magnitude falls, at η while it rises.
 
-``command_saturation`` and ``field_dynamics`` act on a command path: the
+``command_saturation``, ``field_dynamics`` and ``field_decay`` act on a command path: the
 model must have one (``spencer``, or ``+voltage_dependence``), which
 :meth:`~bayes_mr.models.model.Model.param_specs` checks.
 """
@@ -144,9 +147,12 @@ CUBIC_STIFFNESS = Effect(
 # Yield stress of MR fluids saturates with the field as the particles saturate magnetically
 # (Yang et al. 2004, "Dynamic modeling of large-scale MR fluid dampers"; Wang & Liao 2011 review,
 # Smart Mater. Struct. 20 023001, §3: α(u) fitted by saturating polynomials or exponentials).
-# The off value is u_s → ∞ (linear α(u)).
+# It is the field that saturates, so every coefficient the field sets sees the saturated command:
+# the yield force and the field-induced viscous terms (spencer's c0(u), c1(u); c_v·u·ẋ), as in the
+# current-dependent c0, c1 of Yang et al. 2004. The off value is u_s → ∞ (linear in u).
 COMMAND_SATURATION = Effect(
-    "command_saturation", "the yield force saturates with the command: u enters the strength as u_s·tanh(u/u_s)",
+    "command_saturation", "the field saturates with the command: u enters every field-dependent coefficient "
+                          "as u_s·tanh(u/u_s)",
     (ParamSpec("u_s", "V", "command at which the yield-force gain saturates (A for a current command)", 2.0,
                (0, 0, 0, 0), (0.05, 20.0)),),
     needs_voltage=True,
@@ -200,6 +206,21 @@ INERTIA = Effect(
                (1e-4, 1.0)),),
 )
 
+# The field of an MR damper does not fall as it rises: after a command step the force rises and
+# decays with different response times, set by the coil and driver (a voltage-driven coil charges
+# through L/R but discharges through the driver's own path), eddy currents in the steel and the
+# fluid's chain structure (Koo, Goncalves & Ahmadian 2006, "A comprehensive analysis of the response
+# time of MR dampers", Smart Mater. Struct. 15:351–358, measured different rise and fall times;
+# Yang et al. 2004 model the driver and coil separately for that reason). One extra rate ratio on
+# the existing first-order field lag: u̇ = η·(v − u) while |u| rises, r_d·η·(v − u) while it falls.
+# The off value is r_d = 1 (Spencer et al. 1997's symmetric lag).
+FIELD_DECAY = Effect(
+    "field_decay", "the command-to-field lag decays at its own rate: r_d·η while the field falls, η while it rises",
+    (ParamSpec("r_d", "-", "rate of the field lag while the field falls, relative to while it rises", 1.0,
+               (0, 0, 0, 0), (0.05, 20.0)),),
+    needs_voltage=True,
+)
+
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -216,10 +237,11 @@ EFFECTS: dict[str, Effect] = {
         SHEAR_THINNING,
         STRIBECK_FRICTION,
         INERTIA,
+        FIELD_DECAY,
     )
 }
 #: Effects that act on a command path (a form that has one, or ``voltage_dependence``).
-ON_COMMAND = ("command_saturation", "field_dynamics")
+ON_COMMAND = ("command_saturation", "field_dynamics", "field_decay")
 #: Effects only a device test can have, and why.
 DEVICE_ONLY = {"inertia": "the force of a structure or forced test is not measured at the damper; "
                           "the moving mass there is part of the storey (or forced) mass"}

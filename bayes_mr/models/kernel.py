@@ -25,8 +25,8 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
-from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_SC, L_SF, L_ST, _coil_step, _fluid_friction,
-                             _fluid_slope, _saturate, _sgn)
+from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _coil_step, _fluid_friction,
+                             _fluid_slope, _lag_bound, _lag_rate, _saturate, _sgn)
 from .term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
@@ -60,7 +60,7 @@ N_OBS = 3
 # measured-channel block so the older slots keep their indices
 assert L_CSAT == L_OBS + N_OBS, "kernel_effects' slots must follow the measured-channel block"
 # library terms (bayes_mr.models.terms): up to N_TERMS terms θ_j·b_j, b_j chosen by a code
-L_TP = L_SF + 1  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
+L_TP = L_FDEC + 1  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
 N_TERMS = 3
 L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
 L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
@@ -166,9 +166,9 @@ def deriv(lay, cst, p, t, a, s, ds):
     if lay[L_VD] >= 0:
         j = lay[L_VD]
         iu = lay[L_SU]
-        u = s[iu]
-        ds[iu] = p[j + 2] * (v - u)
-        m_s *= 1.0 + p[j] * _saturate(lay, p, u)
+        ds[iu] = _lag_rate(lay, p, p[j + 2], v, s[iu])
+        u = _saturate(lay, p, s[iu])  # the field-dependent coefficients see the saturated command
+        m_s *= 1.0 + p[j] * u
     if lay[L_SA] >= 0:
         j = lay[L_SA]
         ie = lay[L_SE]
@@ -193,10 +193,8 @@ def deriv(lay, cst, p, t, a, s, ds):
         y = s[i]
         z = s[i + 1]
         us = s[i + 2]
-        alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, us, m_s)
-        if lay[L_CSAT] >= 0:
-            alpha = (p[o] + p[o + 1] * _saturate(lay, p, us)) * m_s
-        ds[i + 2] = eta * (v - us)
+        alpha, c0, c1, k0, gam, bet, A, n, eta = _spencer(p, o, _saturate(lay, p, us), m_s)
+        ds[i + 2] = _lag_rate(lay, p, eta, v, us)
         yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
         r = xd - yd
         zn = math.pow(abs(z), n)
@@ -312,7 +310,7 @@ def rate(lay, cst, p, t, s, vmax):
         zn1 = math.pow(zf, n - 1.0)
         lam = n * zn1 * (gam + bet) * rr
         lam += (A + (gam + bet) * zn1 * zf) * alpha / (c0 + c1)
-        lam += k0 / (c0 + c1) + eta
+        lam += k0 / (c0 + c1) + _lag_bound(lay, p, eta)
         damp = c0 * c1 / (c0 + c1)
         if lay[L_PFRAME] >= 0:
             damp += p[lay[L_PFRAME]]
@@ -356,7 +354,7 @@ def rate(lay, cst, p, t, s, vmax):
             lam += slope * coef / p[lay[L_LVR]]
         coupling = coef * slope
     if lay[L_VD] >= 0:
-        lam += abs(p[lay[L_VD] + 2])
+        lam += _lag_bound(lay, p, p[lay[L_VD] + 2])
         damp += abs(p[lay[L_VD] + 1]) * u
     if lay[L_ST] >= 0 or lay[L_SF] >= 0:
         damp += _fluid_slope(lay, cst, p, vmax)

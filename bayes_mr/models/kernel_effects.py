@@ -19,6 +19,7 @@ L_FD = 21  # field_dynamics: tau_c
 L_SC = 22  # state index of the coil current (field_dynamics)
 L_ST = 23  # shear_thinning: c_p, m_hb, v_p
 L_SF = 24  # stribeck_friction: F_st, v_s
+L_FDEC = 25  # field_decay: r_d
 # --- constants (float64 array; see kernel.K_*) -----------------------------------
 K_SMOOTH = 4  # stribeck_friction: width of the smoothed sgn ẋ relative to v_s
 
@@ -34,7 +35,7 @@ def _sgn(v):
 
 @hot(inline="always")
 def _saturate(lay, p, u):
-    """The command as the yield force sees it: u_s·tanh(u/u_s) with command_saturation, else u."""
+    """The command as the field-dependent coefficients see it: u_s·tanh(u/u_s) with command_saturation, else u."""
     if lay[L_CSAT] < 0:
         return u
     us = p[lay[L_CSAT]]
@@ -86,3 +87,20 @@ def _coil_step(lay, p, s, v0, v1, hs):
     vd = (v1 - v0) / hs
     e = math.exp(-hs / tau) if hs < 700.0 * tau else 0.0
     s[ic] = -tau * vd + (s[ic] + tau * vd) * e
+
+
+@hot(inline="always")
+def _lag_rate(lay, p, eta, v, u):
+    """Rate u̇ [V/s] of a command-to-field lag of rate η driven by v: η·(v − u), and with
+    field_decay r_d·η·(v − u) while the field's magnitude falls (|v| < |u|)."""
+    if lay[L_FDEC] >= 0 and abs(v) < abs(u):
+        return eta * p[lay[L_FDEC]] * (v - u)
+    return eta * (v - u)
+
+
+@hot(inline="always")
+def _lag_bound(lay, p, eta):
+    """Upper bound of a field lag's rate [1/s] (η, or η·max(1, r_d) with field_decay)."""
+    if lay[L_FDEC] >= 0:
+        return abs(eta) * max(1.0, p[lay[L_FDEC]])
+    return abs(eta)

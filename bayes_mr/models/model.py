@@ -374,6 +374,7 @@ class Model:
             "field_dynamics": kernel.L_FD,
             "shear_thinning": kernel.L_ST,
             "stribeck_friction": kernel.L_SF,
+            "field_decay": kernel.L_FDEC,
         }
         for e in self.effects:
             if e.name in slot:

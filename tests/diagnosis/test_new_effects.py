@@ -13,12 +13,13 @@ import pytest
 from bayes_mr.diagnosis import THRESHOLD, diagnose
 from bayes_mr.diagnosis.screen import applicable
 from bayes_mr.models import NONE, get_model
+from bayes_mr.models.effects import ON_COMMAND
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import Inputs, simulate, synthesize
 from records import case_id, device_inputs, effect_cases, naming_failures, structure_inputs
 
 MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
-NEW = ("command_saturation", "field_dynamics", "shear_thinning", "stribeck_friction", "inertia")
+NEW = ("command_saturation", "field_dynamics", "shear_thinning", "stribeck_friction", "inertia", "field_decay")
 #: The voltage-dependent base of the command-path effects (a_v [1/V], c_v [N·s/(m·V)], eta [1/s]).
 VD = {"a_v": 1.0, "c_v": 50.0, "eta": 50.0}
 
@@ -28,6 +29,7 @@ STRUCTURE_MAGNITUDES = {
     "stribeck_friction": [{"F_st": 2.0, "v_s": 0.008}, {"F_st": 5.0, "v_s": 0.008}],
     "command_saturation": [1.5, 0.7],  # V, against commands up to 2.5 V
     "field_dynamics": [0.01, 0.03],  # s, before the 20 ms field lag
+    "field_decay": [0.3, 4.0],  # decay rate / rise rate of the 20 ms field lag
 }
 #: ... and a dahl damper on a device test (~0.15 m/s peak velocity, ~110 N peak force).
 DEVICE_MAGNITUDES = {
@@ -36,6 +38,7 @@ DEVICE_MAGNITUDES = {
     "command_saturation": [1.5, 0.7],
     "field_dynamics": [0.01, 0.03],
     "inertia": [1.0, 3.0],  # kg
+    "field_decay": [0.3, 4.0],
 }
 
 
@@ -59,7 +62,7 @@ def hidden_record(kind: str, effect: str | None, value=None, *, seed: int = 0, d
     under a stepped command. Returns the record and the base model diagnose starts from.
     """
     if commanded is None:
-        commanded = effect in ("command_saturation", "field_dynamics")
+        commanded = effect in ON_COMMAND
     base = "dahl+voltage_dependence" if commanded else "dahl"
     model = get_model(base + (f"+{effect}" if effect else ""))
     values = dict(VD) if commanded else {}
@@ -87,11 +90,11 @@ def _with(base: str, effect: str, kind: str, values: dict, inputs: Inputs):
 @pytest.mark.parametrize("kind", ["device", "structure"])
 @pytest.mark.parametrize("effect,off", [
     ("command_saturation", {"u_s": 1e6}), ("field_dynamics", {"tau_c": 1e-9}),
-    ("shear_thinning", {"c_p": 1e-9}), ("stribeck_friction", {"F_st": 1e-9}),
+    ("shear_thinning", {"c_p": 1e-9}), ("stribeck_friction", {"F_st": 1e-9}), ("field_decay", {"r_d": 1.0}),
 ])
 def test_an_effect_switched_off_gives_the_base_model_back(kind, effect, off):
     """Every new effect nests its base: at its off value the response is the base model's."""
-    base = "dahl+voltage_dependence" if effect in ("command_saturation", "field_dynamics") else "dahl"
+    base = "dahl+voltage_dependence" if effect in ON_COMMAND else "dahl"
     inputs = device_inputs(0.01) if kind == "device" else structure_inputs(3.0, MASS)
     y0, y1 = _with(base, effect, kind, off, inputs)
     assert np.max(np.abs(y1 - y0)) < 1e-6 * np.max(np.abs(y0))
@@ -139,6 +142,40 @@ def test_field_dynamics_is_a_second_lag_of_the_step_response():
     np.testing.assert_allclose(share(VD, 1e-7), one, atol=1e-4 * one[-1])
 
 
+def _command_share(model: str, values: dict, volt: np.ndarray, fs: float = 1000.0, speed: float = 0.05):
+    """Force of ``model`` at constant velocity under ``volt`` less the same without command [N]: with dahl's
+    z saturated the force is linear in the field-dependent coefficients, so this is the command's share."""
+    n = len(volt)
+    x = speed * np.arange(n) / fs
+    m = get_model(model)
+    th = m.theta("device", values)
+    run = lambda v: simulate(m, Inputs.device(x, np.full(n, speed), 1 / fs, v), th)["force"]  # noqa: E731
+    return run(volt) - run(np.zeros(n))
+
+
+def test_field_decay_rises_at_eta_and_falls_at_r_d_eta():
+    """A command pulse: the field lag's half-rise time is ln 2/η, its half-decay time ln 2/(r_d·η)."""
+    n = 1200
+    volt = np.where((np.arange(n) >= 100) & (np.arange(n) < 600), 2.0, 0.0)
+    share = _command_share("dahl+voltage_dependence+field_decay", {**VD, "r_d": 0.25}, volt)
+    rise = int(np.argmax(share > 0.5 * share[599])) - 100
+    fall = int(np.argmax(share[600:] < 0.5 * share[599]))
+    assert rise == pytest.approx(1e3 * np.log(2) / 50.0, abs=1.5)  # 13.9 ms for η = 50 /s
+    assert fall == pytest.approx(1e3 * np.log(2) / (0.25 * 50.0), abs=1.5)  # 55.5 ms at r_d = 0.25
+    sym = _command_share("dahl+voltage_dependence", VD, volt)
+    np.testing.assert_allclose(share[:600], sym[:600], atol=1e-9 * share[599])  # the rise is untouched
+
+
+def test_command_saturation_saturates_every_field_dependent_coefficient():
+    """At a held command the command's share is (a_v·F_d + c_v·ẋ)·u_s·tanh(v/u_s): strength and viscous term."""
+    volt = np.full(800, 2.0)
+    vals = {**VD, "u_s": 0.8}
+    share = _command_share("dahl+voltage_dependence+command_saturation", vals, volt)
+    f_d = get_model("dahl").theta("device", {})[get_model("dahl").param_names("device").index("F_d")]
+    expect = (VD["a_v"] * f_d + VD["c_v"] * 0.05) * 0.8 * np.tanh(2.0 / 0.8)
+    assert share[-1] == pytest.approx(expect, rel=1e-6)
+
+
 def test_shear_thinning_and_stribeck_follow_their_equations():
     """A device test at constant velocities: the added force is the equation's, in both directions."""
     fs = 1000.0
@@ -162,7 +199,7 @@ def test_every_new_effect_composes_with_every_form(form):
     for effect in NEW:
         for kind, inputs in (("device", dev), ("structure", st)):
             name = f"{form}+{effect}"
-            if effect in ("command_saturation", "field_dynamics") and form != "spencer":
+            if effect in ON_COMMAND and form != "spencer":
                 with pytest.raises(ValueError, match="command path"):
                     get_model(name).param_names(kind)
                 name = f"{form}+voltage_dependence+{effect}"
@@ -181,8 +218,8 @@ def test_diagnose_offers_the_new_effects_only_where_they_apply():
     plain = {e.name for e in applicable(get_model("dahl"), rec)}
     commanded = {e.name for e in applicable(get_model("dahl+voltage_dependence"), rec)}
     assert {"shear_thinning", "stribeck_friction"} <= plain
-    assert not plain & {"command_saturation", "field_dynamics", "inertia"}
-    assert {"command_saturation", "field_dynamics"} <= commanded and "inertia" not in commanded
+    assert not plain & {*ON_COMMAND, "inertia"}
+    assert set(ON_COMMAND) <= commanded and "inertia" not in commanded
     dev, _ = hidden_record("device", None, duration=1.0)
     assert "inertia" in {e.name for e in applicable(get_model("dahl"), dev)}
 
@@ -206,6 +243,7 @@ DEFAULT = [
     ("device", "inertia", 0, 1),
     ("device", "command_saturation", 1, 0),
     ("device", "field_dynamics", 1, 1),
+    ("device", "field_decay", 1, 0),
 ]
 FULL = effect_cases(STRUCTURE_MAGNITUDES, DEVICE_MAGNITUDES, DEFAULT)
 
