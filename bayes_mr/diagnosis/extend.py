@@ -10,7 +10,7 @@ trained on A only, predict B?
    the profile-likelihood optimum (:func:`.fits.converge`) — no search from
    scratch: a 13-parameter spencer search costs minutes, the refinement
    seconds.
-2. **Rank once.** Every candidate effect (:data:`CANDIDATES` that apply to
+2. **Rank once** (``rank=True``). Every candidate effect (:data:`CANDIDATES` that apply to
    the model and record, :func:`.screen.applicable`) is fitted as an
    extension of the base and scored (:func:`.screen.screen_one`).
 3. **Add in that order.** Each candidate that passed in the ranking is
@@ -95,7 +95,7 @@ def _num(v) -> float | None:
 
 def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict], *,
            candidates: tuple[str, ...] = CANDIDATES, threshold: float = THRESHOLD, max_effects: int = 5,
-           seed: int = 0, progress=None) -> dict:
+           rank: bool = True, seed: int = 0, progress=None) -> dict:
     """Fit the extensions a device record asks for on part A; score base and extension on part B.
 
     Parameters
@@ -112,6 +112,12 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         Score an effect must pass (:data:`~.screen.THRESHOLD`, as diagnose).
     max_effects : int
         Most effects added.
+    rank : bool
+        Rank the candidates against the base first (one fit each) and add the
+        passing ones best first; False tries them in the order given, each
+        once against the current model (about half the fits: for a stiff
+        model whose likely effects are known, e.g. :data:`CANDIDATES`' order
+        on an MR damper's device test).
     seed : int
         Seed of the effects' starts.
     progress : bool or callable
@@ -131,22 +137,27 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
     fit = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1])
     first = fit
     say(f"extend {fit.name}: base on A refitted, part B NRMSE {part_nrmse(fit, part_b):.4f}")
-    names = [e.name for e in applicable(fit.model, part_a) if e.name in candidates]
-    ranking = sorted((screen_one(part_a, fit, EFFECTS[n], seed=seed) for n in names), key=lambda c: -c.score)
-    for c in ranking:
-        say(f"  {c.name}: score {c.score:.4g}, MSE ratio {c.mse_ratio if c.fit else float('nan'):.3f}")
+    offered = {e.name for e in applicable(fit.model, part_a)}
+    names = [n for n in candidates if n in offered]
+    ranking = []
+    if rank:
+        ranking = sorted((screen_one(part_a, fit, EFFECTS[n], seed=seed) for n in names), key=lambda c: -c.score)
+        for c in ranking:
+            say(f"  {c.name}: score {c.score:.4g}, MSE ratio {c.mse_ratio if c.fit else float('nan'):.3f}")
+        names = [c.name for c in ranking if passes(c, threshold)]
     steps, added = [], []
-    for cand in ranking:
-        if len(added) >= max_effects or not passes(cand, threshold):
-            continue
-        now = cand if not added else screen_one(part_a, fit, EFFECTS[cand.name], seed=seed)
+    for name in names:
+        if len(added) >= max_effects:
+            break
+        cand = next((c for c in ranking if c.name == name), None)
+        now = cand if cand is not None and not added else screen_one(part_a, fit, EFFECTS[name], seed=seed)
         ok = passes(now, threshold)
-        steps.append(_step(cand.name, now, part_b, ok))
-        say(f"  + {cand.name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}; "
+        steps.append(_step(name, now, part_b, ok))
+        say(f"  + {name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}; "
             f"part B NRMSE {steps[-1]['force_nrmse_b']}")
         if ok:
             fit = now.fit
-            added.append(cand.name)
+            added.append(name)
     pred_b = predict(fit.model, part_b, fit.theta_full)
     unexp = unexplained(part_b, residual_views(part_b, pred_b)) if pred_b is not None else {}
     return {

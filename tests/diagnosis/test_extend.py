@@ -22,14 +22,14 @@ def _parts(rec, share=0.6):
     return rec.isel(time=slice(0, cut)), b.assign_coords(time=b["time"].values - float(b["time"].values[0]))
 
 
-@pytest.mark.parametrize("hidden", [None, 3.0])
-def test_extend_adds_the_hidden_physics_and_only_it(hidden):
+@pytest.mark.parametrize("hidden,rank", [(None, True), (3.0, True), (3.0, False)])
+def test_extend_adds_the_hidden_physics_and_only_it(hidden, rank):
     """A dahl damper with hidden inertia (3 kg): inertia is added on A and lowers the error on B;
     the clean record gets nothing added. The base starts from the true dahl parameters."""
     rec = hidden_record(hidden)
     a, b = _parts(rec)
     theta = dict(zip(get_model("dahl").param_names("device"), get_model("dahl").theta("device")))
-    out = extend(a, b, ("dahl", theta), candidates=("inertia", "shear_thinning", "force_offset"))
+    out = extend(a, b, ("dahl", theta), candidates=("inertia", "shear_thinning", "force_offset"), rank=rank)
     if hidden:
         assert out["added"][0] == "inertia"
         assert out["extended"]["force_nrmse_b"] < 0.5 * out["base"]["force_nrmse_b"]
