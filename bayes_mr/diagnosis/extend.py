@@ -40,6 +40,7 @@ from ..likelihood import OutputError
 from ..models import EFFECTS, Model, get_model
 from ..progress import say as progress_say
 from ..scores import force_nrmse
+from .chain import ChainOutputError, decimated, through_chain
 from .fits import Fit, _finish, converge, laplace, predict
 from .residuals import residual_views
 from .screen import THRESHOLD, applicable, passes, screen_one
@@ -51,14 +52,16 @@ CANDIDATES = ("inertia", "command_saturation", "field_decay", "field_dynamics", 
               "stribeck_friction", "asymmetry", "force_offset", "low_velocity_rolloff", "voltage_dependence")
 
 
-def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float]) -> Fit:
+def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float], *, chain: bool = False) -> Fit:
     """``model`` refitted on ``record`` from the parameters ``theta`` [SI] (its optimum elsewhere or here).
 
     Parameters missing from ``theta`` take their defaults; spencer's reported
     ``x0`` is turned back into the preload ``F_pre = k1·x0`` it stands for.
+    With ``chain`` the prediction passes through the record's decimation
+    filter (:class:`~.chain.ChainOutputError`), and so do every extension's.
     """
     model = get_model(model)
-    lik = OutputError(model, record)
+    lik = (ChainOutputError if chain else OutputError)(model, record)
     theta = dict(theta)
     if "F_pre" in lik.par.names and "F_pre" not in theta and {"k1", "x0"} <= set(theta):
         theta["F_pre"] = theta["k1"] * theta["x0"]
@@ -69,12 +72,14 @@ def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float]) -> F
     return _finish(lik, laplace(lik, phi), record)
 
 
-def part_nrmse(fit: Fit, record: xr.Dataset) -> float | None:
-    """Force NRMSE of ``fit``'s model, as fitted, on ``record`` (None if it diverges there)."""
+def part_nrmse(fit: Fit, record: xr.Dataset, *, chain: bool = False) -> float | None:
+    """Force NRMSE of ``fit``'s model, as fitted, on ``record`` (None if it diverges there); with ``chain``
+    the prediction first passes through the record's decimation filter (:func:`~.chain.through_chain`)."""
     pred = predict(fit.model, record, fit.theta_full)
     if pred is None:
         return None
-    return force_nrmse(record["force"].values, pred["force"], record["valid"].values.astype(bool))
+    force = through_chain(record, pred["force"]) if chain else pred["force"]
+    return force_nrmse(record["force"].values, force, record["valid"].values.astype(bool))
 
 
 def _step(name: str, cand, part_b: xr.Dataset, kept: bool) -> dict:
@@ -85,6 +90,7 @@ def _step(name: str, cand, part_b: xr.Dataset, kept: bool) -> dict:
             "force_nrmse_a": None if fit is None else force_nrmse(
                 fit.lik.record["force"].values, fit.predicted["force"], fit.lik.record["valid"].values.astype(bool)),
             "force_nrmse_b": None if fit is None else part_nrmse(fit, part_b),
+            "force_nrmse_b_chain": None if fit is None else part_nrmse(fit, part_b, chain=True),
             "params": {} if fit is None else {k: v for k, v in fit.params().items() if k in own},
             "error": cand.error}
 
@@ -95,7 +101,7 @@ def _num(v) -> float | None:
 
 def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict], *,
            candidates: tuple[str, ...] = CANDIDATES, threshold: float = THRESHOLD, max_effects: int = 5,
-           rank: bool = True, seed: int = 0, progress=None) -> dict:
+           rank: bool = True, chain: bool | None = None, seed: int = 0, progress=None) -> dict:
     """Fit the extensions a device record asks for on part A; score base and extension on part B.
 
     Parameters
@@ -118,6 +124,11 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         once against the current model (about half the fits: for a stiff
         model whose likely effects are known, e.g. :data:`CANDIDATES`' order
         on an MR damper's device test).
+    chain : bool, optional
+        Fit with every prediction passed through the record's decimation
+        filter (:mod:`.chain`); default: when part A was decimated. Part-B
+        errors are given both ways in any case (``force_nrmse_b``: sample
+        for sample; ``force_nrmse_b_chain``: through the filter).
     seed : int
         Seed of the effects' starts.
     progress : bool or callable
@@ -134,7 +145,8 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
-    fit = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1])
+    chain = decimated(part_a) if chain is None else chain
+    fit = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1], chain=chain)
     first = fit
     say(f"extend {fit.name}: base on A refitted, part B NRMSE {part_nrmse(fit, part_b):.4f}")
     offered = {e.name for e in applicable(fit.model, part_a)}
@@ -162,7 +174,7 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
     unexp = unexplained(part_b, residual_views(part_b, pred_b)) if pred_b is not None else {}
     return {
         "base": _summary(first, part_a, part_b), "extended": _summary(fit, part_a, part_b), "added": added,
-        "ranking": [c.to_dict() for c in ranking], "steps": steps, "threshold": threshold,
+        "ranking": [c.to_dict() for c in ranking], "steps": steps, "threshold": threshold, "chain": bool(chain),
         "unexplained_b": unexp, "unexplained_ratio_b": _num(worst_ratio(unexp)) if unexp else None,
         "wall_s": round(_time.perf_counter() - t0, 2),
     }
@@ -170,4 +182,5 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
 
 def _summary(fit: Fit, part_a: xr.Dataset, part_b: xr.Dataset) -> dict:
     return {"model": fit.name, "force_nrmse_a": part_nrmse(fit, part_a), "force_nrmse_b": part_nrmse(fit, part_b),
+            "force_nrmse_b_chain": part_nrmse(fit, part_b, chain=True),
             "log_evidence": _num(fit.result.log_evidence), "params": fit.params()}

@@ -303,7 +303,8 @@ def screen_one(record: xr.Dataset, base: Fit, effect: Effect, *, seed: int = 0) 
     try:
         if effect.name == "sensor_delay":
             return _screen_delay(record, base, effect, ranges)
-        lik = OutputError(model, record, ranges=ranges, scales=base.lik.scales, residual=base.lik.residual)
+        # the base's likelihood class (a measurement chain, :mod:`.chain`, stays on for its extensions)
+        lik = type(base.lik)(model, record, ranges=ranges, scales=base.lik.scales, residual=base.lik.residual)
         starts = effect_starts(lik, base.params(), effect, seed)
         ext, runs = refit(lik, starts, base.result.sigma)
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
@@ -352,11 +353,11 @@ def _screen_delay(record: xr.Dataset, base: Fit, effect: Effect, ranges: dict) -
     sse = [float(np.sum(((y - _shift(sim, k)[lik0.valid]) / sd) ** 2)) for k in range(1, n_lags + 1)]
     k_best = 1 + int(np.argmin(sse))
     fixed_ranges = {k: v for k, v in ranges.items() if k != "delay"}
-    lik_k = OutputError(model, record, ranges=fixed_ranges, fixed={"delay": k_best * dt}, scales=base.lik.scales,
+    lik_k = type(base.lik)(model, record, ranges=fixed_ranges, fixed={"delay": k_best * dt}, scales=base.lik.scales,
                         residual=base.lik.residual)
     start = _phi_of(lik_k.par.coords, np.arange(lik_k.n_params), np.array([base.params()[n] for n in lik_k.par.names]))
     fit_k, _ = refit(lik_k, start[None], base.result.sigma, n_refine=1)
-    lik = OutputError(model, record, ranges=ranges, scales=base.lik.scales, residual=base.lik.residual)
+    lik = type(base.lik)(model, record, ranges=ranges, scales=base.lik.scales, residual=base.lik.residual)
     theta = {**fit_k.params(), "delay": k_best * dt}
     start = _phi_of(lik.par.coords, np.arange(lik.n_params), np.array([theta[n] for n in lik.par.names]))
     ext, runs = refit(lik, np.clip(start, lik.phi_lo, lik.phi_hi)[None], fit_k.result.sigma, n_refine=1)
