@@ -45,3 +45,17 @@ def test_the_true_model_through_the_chain_predicts_the_decimated_force():
     raw = np.sqrt(np.mean((f - pred[inner]) ** 2))
     chained = np.sqrt(np.mean((f - through_chain(dec, pred)[inner]) ** 2))
     assert chained < 0.9 * raw
+
+
+def test_extensions_keep_the_base_fits_measurement_chain():
+    """A base fitted through the chain hands it to every extension diagnose or extend fits."""
+    from bayes_mr.diagnosis.extend import fit_at
+    from bayes_mr.diagnosis.screen import screen_one
+    from bayes_mr.models import EFFECTS
+
+    model, theta, rec = _record()
+    dec = decimate_record(rec, 8)
+    base = fit_at(dec, model, dict(zip(model.param_names("device"), theta)), chain=True)
+    assert isinstance(base.lik, ChainOutputError)
+    cand = screen_one(dec, base, EFFECTS["force_offset"])
+    assert isinstance(cand.fit.lik, ChainOutputError)
