@@ -152,14 +152,7 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
     fit = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1], chain=chain)
     first = fit
     say(f"extend {fit.name}: base on A refitted, part B NRMSE {part_nrmse(fit, part_b):.4f}")
-    offered = {e.name for e in applicable(fit.model, part_a)}
-    names = [n for n in candidates if n in offered]
-    ranking = []
-    if rank:
-        ranking = sorted((screen_one(part_a, fit, EFFECTS[n], seed=seed) for n in names), key=lambda c: -c.score)
-        for c in ranking:
-            say(f"  {c.name}: score {c.score:.4g}, MSE ratio {c.mse_ratio if c.fit else float('nan'):.3f}")
-        names = [c.name for c in ranking if passes(c, threshold)]
+    names, ranking = _order(part_a, fit, candidates, rank, threshold, seed, say)
     steps, added = [], []
     for name in names:
         if len(added) >= max_effects:
@@ -181,6 +174,18 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         "unexplained_b": unexp, "unexplained_ratio_b": _num(worst_ratio(unexp)) if unexp else None,
         "wall_s": round(_time.perf_counter() - t0, 2), "_fit": fit,
     }
+
+
+def _order(part_a: xr.Dataset, fit: Fit, candidates, rank: bool, threshold: float, seed: int, say):
+    """Names to try, in order, and the ranking against ``fit`` (empty without ``rank``)."""
+    offered = {e.name for e in applicable(fit.model, part_a)}
+    names = [n for n in candidates if n in offered]
+    if not rank:
+        return names, []
+    ranking = sorted((screen_one(part_a, fit, EFFECTS[n], seed=seed) for n in names), key=lambda c: -c.score)
+    for c in ranking:
+        say(f"  {c.name}: score {c.score:.4g}, MSE ratio {c.mse_ratio if c.fit else float('nan'):.3f}")
+    return [c.name for c in ranking if passes(c, threshold)], ranking
 
 
 def _summary(fit: Fit, part_a: xr.Dataset, part_b: xr.Dataset) -> dict:
