@@ -5,6 +5,7 @@ script after the command::
 
     python scripts/update_readme.py run [--out results]
     python scripts/update_readme.py bench [--json results/bench.json]
+    python scripts/update_readme.py study NAME [--out results/studies/NAME]
 
 ``run`` reads ``OUT/summary.json``, copies the README's figures of that run
 into ``figures/`` beside the README (``results/`` is not under version
@@ -12,7 +13,10 @@ control) and writes the section between ``<!-- run:start -->`` and
 ``<!-- run:end -->``; it writes nothing for a run other than the full job on
 the packaged record (``--quick``, another budget or record) unless ``--force``.
 ``bench`` writes the section between ``<!-- bench:start -->`` and
-``<!-- bench:end -->`` from the benchmark's JSON. The text of each section is
+``<!-- bench:end -->`` from the benchmark's JSON. ``study NAME`` copies a
+full (not ``--quick``) study's ``report.md`` (its title dropped, its figures
+copied into ``figures/`` as ``NAME_FILE.png``) between ``<!-- NAME:start -->``
+and ``<!-- NAME:end -->``. The text of each section is
 built by :mod:`bayes_mr.report.readme`; the rest of the README is left alone.
 """
 
@@ -80,6 +84,19 @@ def write_bench(path: Path, readme: Path) -> bool:
     return update_section(readme, "bench", bench_section(json.loads(path.read_text())))
 
 
+def write_study(name: str, out: Path, readme: Path) -> bool:
+    """A study's section from ``out/report.md``, its figures copied beside ``readme``."""
+    lines = (out / "report.md").read_text().splitlines()
+    body = "\n".join(lines[1:] if lines and lines[0].startswith("# ") else lines)
+    figure_dir = readme.parent / "figures"
+    figure_dir.mkdir(parents=True, exist_ok=True)
+    for png in sorted(out.glob("*.png")):
+        target = figure_dir / f"{name}_{png.name}"
+        shutil.copyfile(png, target)
+        body = body.replace(f"]({png.name})", f"]({figure_dir.name}/{target.name})")
+    return update_section(readme, name, body)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="section", required=True)
@@ -90,9 +107,15 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("bench", help="the bench section, from the benchmark's JSON")
     p.add_argument("--json", default=Path("results/bench.json"), type=Path, help="default results/bench.json")
     p.add_argument("--readme", default=README, type=Path, help=argparse.SUPPRESS)
+    p = sub.add_parser("study", help="a study's section, from its report.md")
+    p.add_argument("name", help="the study (and the README's section markers)")
+    p.add_argument("--out", type=Path, default=None, help="the study's output folder (default results/studies/NAME)")
+    p.add_argument("--readme", default=README, type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.section == "run":
         done = write_run(args.out, args.readme, args.force)
+    elif args.section == "study":
+        done = write_study(args.name, args.out or Path("results/studies") / args.name, args.readme)
     else:
         done = write_bench(args.json, args.readme)
     if done:

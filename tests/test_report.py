@@ -96,3 +96,17 @@ def test_a_quick_run_leaves_the_readme_alone(tmp_path):
     readme.write_text("<!-- run:start -->\nkept\n<!-- run:end -->\n")
     _script().main(["run", "--out", str(out), "--readme", str(readme)])
     assert "kept" in readme.read_text() and not (tmp_path / "figures").exists()
+
+
+def test_study_section_copies_its_report_and_figures(tmp_path):
+    out = tmp_path / "results" / "studies" / "damper-extension"
+    out.mkdir(parents=True)
+    (out / "report.md").write_text("# Title\n\nAdded: inertia.\n\n![part B](extension_part_b.png)\n")
+    (out / "extension_part_b.png").write_bytes(b"png")
+    readme = tmp_path / "README.md"
+    readme.write_text("x\n<!-- damper-extension:start -->\nold\n<!-- damper-extension:end -->\ny\n")
+    assert _script().main(["study", "damper-extension", "--out", str(out), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert "Added: inertia." in text and "old" not in text and "# Title" not in text
+    assert "![part B](figures/damper-extension_extension_part_b.png)" in text
+    assert (tmp_path / "figures" / "damper-extension_extension_part_b.png").read_bytes() == b"png"
