@@ -307,26 +307,34 @@ def run_ladder(
     g[K], tau[K], chains[K] = g_top, _tau(g_top), posterior
     g[0] = _exact_rung(tp, target, path, n_exact, np.random.default_rng(exact_seq))[:, None]
     rungs = list(range(K - 1, 0, -1))
-    if path == "reference":
-        if executor is not None and settings.backend is not None:
+    settings_k = {k: replace(settings, seed=temp_seqs[k]) for k in rungs}
+    for k, res in zip(rungs, _run_rungs(tp, betas, rungs, post[-1], settings_k, executor)):
+        gk = tp.g_from_lp(res.chain[res.burn:], res.log_prob[res.burn:], float(betas[k]))
+        g[k], tau[k], chains[k] = gk, _tau(gk), res
+    return Ladder(betas, g, tau, path, extra, extra_var, chains, _time.perf_counter() - t0)
+
+
+def _run_rungs(tp: _Path, betas: np.ndarray, rungs: list[int], top: np.ndarray, settings_k: dict, executor) -> list:
+    """The chains of ``rungs`` (indices into ``betas``, top down), from the posterior's last walkers ``top``.
+
+    Reference path: independent jobs (:func:`bayes_mr.executor.run_jobs`, on ``executor`` if given);
+    prior path: in order, each rung from where the one above ended.
+    """
+    if tp.kind == "reference":
+        if executor is not None and any(s.backend is not None for s in settings_k.values()):
             raise ValueError("a ladder on an executor cannot share one HDF5 backend between its rungs")
         ref = share(executor, tp)
-        jobs = [(ref, float(betas[k]), post[-1], replace(settings, seed=temp_seqs[k]), f"ti_{k:02d}")
-                for k in rungs]
+        jobs = [(ref, float(betas[k]), top, settings_k[k], f"ti_{k:02d}") for k in rungs]
         outcomes = run_jobs(rung_chain, jobs, executor=executor)
         failed = [o.error for o in outcomes if not o.ok]
         if failed:
             raise RuntimeError(f"ladder rung failed: {failed[0]}")
-        done = [o.value for o in outcomes]
-    else:
-        done, start = [], post[-1]
-        for k in rungs:
-            done.append(rung_chain(tp, float(betas[k]), start, replace(settings, seed=temp_seqs[k]), f"ti_{k:02d}"))
-            start = done[-1].chain[-1]
-    for k, res in zip(rungs, done):
-        gk = tp.g_from_lp(res.chain[res.burn:], res.log_prob[res.burn:], float(betas[k]))
-        g[k], tau[k], chains[k] = gk, _tau(gk), res
-    return Ladder(betas, g, tau, path, extra, extra_var, chains, _time.perf_counter() - t0)
+        return [o.value for o in outcomes]
+    done, start = [], top
+    for k in rungs:
+        done.append(rung_chain(tp, float(betas[k]), start, settings_k[k], f"ti_{k:02d}"))
+        start = done[-1].chain[-1]
+    return done
 
 
 def rung_chain(tp: _Path, beta: float, start: np.ndarray, settings: MCMCSettings, group: str) -> MCMCResult:
