@@ -295,11 +295,46 @@ def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, o
             "diagnose_record": f"dahl + {offset:g} N force offset hidden, {duration:g} s at {fs:g} Hz"}
 
 
-def run_bench(seed: int = 0, progress=print, boucwen: bool = False) -> dict:
+#: The forms ``compare_s`` compares (the issue's three: a Dahl record fitted by itself and two rivals).
+COMPARE_FORMS = ("dahl", "normalized-bouc-wen", "lugre")
+
+
+def compare_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, workers: int | None = None) -> dict:
+    """Wall time of ``compare`` of :data:`COMPARE_FORMS` × lsq, mcmc, ukf on a 30 s, 1 kHz structure test.
+
+    The thesis's numerical frame (m = 50 kg), a dahl damper, band-limited ground
+    noise to 20 Hz, 1 % noise; the evidence route is thermodynamic integration
+    (every form has an emcee row). ``workers``: on a local cluster of that many
+    one-thread processes (``compare --workers N``), else in process.
+
+    Returns
+    -------
+    dict
+        ``compare_s`` [s], ``compare_workers``, ``compare_selected``, ``compare_selected_by``,
+        ``compare_fit_s`` (``"model × engine"`` → wall time of that fit [s]) and ``compare_record``.
+    """
+    from .comparison import compare
+    from .executor import open_executor
+    from .signals import make_signal
+
+    sig = make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=20.0, seed=seed)
+    rec = _frame_record("dahl", sig, seed=seed, source=f"bench: blwn {duration:g} s")
+    with open_executor(workers=workers) as ex:
+        t0 = _time.perf_counter()
+        out = compare(rec, COMPARE_FORMS, engines=("lsq", "mcmc", "ukf"), seed=seed, progress=False, executor=ex)
+        wall = _time.perf_counter() - t0
+    return {"compare_s": wall, "compare_workers": int(workers or 0), "compare_selected": out["selected"],
+            "compare_selected_by": out.get("selected_by") or out.get("refused"),
+            "compare_fit_s": {f"{r['model']} × {r['engine']}": float(r.get("wall_s", math.nan)) for r in out["rows"]},
+            "compare_record": f"dahl, {duration:g} s at {fs:g} Hz; {', '.join(COMPARE_FORMS)} × lsq, mcmc, ukf"}
+
+
+def run_bench(seed: int = 0, progress=print, boucwen: bool = False, compare: bool = False) -> dict:
     """All benchmark figures (the ``bench`` keys of docs/CONTRACT.md and a few more).
 
     ``boucwen``: also :func:`boucwen_benchmark_timing` (``bayes-mr bench --boucwen``) — the Bouc–Wen
     benchmark record's fit takes longer than the rest of the bench together, so ``make bench`` leaves it out.
+    ``compare``: also :func:`compare_timing` (``bayes-mr bench --compare``; tens of minutes, also left out).
     """
     out = {}
     progress("UKF per step, ours vs filterpy …")
@@ -315,4 +350,7 @@ def run_bench(seed: int = 0, progress=print, boucwen: bool = False) -> dict:
     if boucwen:
         progress("bouc-wen on the Bouc–Wen benchmark record (lsq, MCMC) …")
         out.update(boucwen_benchmark_timing(seed=seed))
+    if compare:
+        progress("compare, three forms × lsq, mcmc, ukf on a 30 s record at 1 kHz …")
+        out.update(compare_timing(seed=seed))
     return out

@@ -280,7 +280,7 @@ def cmd_bench(args) -> int:
     from .bench import run_bench
 
     say = progress_say(on_terminal(True))
-    result = run_bench(seed=args.seed, progress=say, boucwen=args.boucwen)
+    result = run_bench(seed=args.seed, progress=say, boucwen=args.boucwen, compare=args.compare)
     _write_json(result, args.json)
     return 0
 

@@ -184,6 +184,9 @@ def _job_parsers(sub) -> None:
     p.add_argument("--boucwen", action="store_true",
                    help="also time bouc-wen lsq and MCMC on the packaged Bouc–Wen benchmark record (40 960 samples, "
                         "band-limited inputs; long: not part of make bench)")
+    p.add_argument("--compare", action="store_true",
+                   help="also time compare of dahl, normalized-bouc-wen and lugre × lsq, mcmc, ukf on a 30 s, "
+                        "1 kHz structure test, TI evidence (compare_s; long: not part of make bench)")
     _no_readme_flag(p)
 
 

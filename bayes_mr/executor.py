@@ -219,6 +219,32 @@ def _run_on(executor, fn: Callable, jobs: Sequence[tuple], start, done) -> list[
 
 
 @contextlib.contextmanager
+def job_executor(given=None) -> Iterator[object]:
+    """The executor a job's own sub-jobs should use: ``given``, else its Dask cluster, else None.
+
+    A job running as a task on a Dask worker (a ``compare`` fit on
+    ``--scheduler``/``--workers``) gets a client of that cluster
+    (``distributed.worker_client``: the task leaves its worker's thread pool
+    while it waits, so its sub-jobs — an evidence ladder's rungs — run on the
+    cluster's free workers, this one included). Anywhere else (in process, a
+    process pool) it is ``given``, None by default: the sub-jobs then run in
+    the job's own process. Sub-jobs give the same numbers wherever they run.
+    """
+    if given is not None:
+        yield given
+        return
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+    except (ImportError, ValueError):  # not on a Dask worker
+        yield None
+        return
+    with worker_client() as client:
+        yield client
+
+
+@contextlib.contextmanager
 def open_executor(scheduler: str | None = None, workers: int | None = None) -> Iterator[object]:
     """The executor of ``--scheduler ADDRESS`` / ``--workers N``, closed after.
 

@@ -67,6 +67,29 @@ def test_compare_on_a_dask_cluster_gives_the_in_process_json(tmp_path, record, c
     assert (tmp_path / "fits" / "dahl_force_offset__lsq.nc").exists()
 
 
+def _no_walls(obj):
+    """``obj`` without any ``wall_s`` at any depth (wall times depend on where a job ran)."""
+    if isinstance(obj, dict):
+        return {k: _no_walls(v) for k, v in obj.items() if k != "wall_s"}
+    if isinstance(obj, list):
+        return [_no_walls(v) for v in obj]
+    return obj
+
+
+@pytest.mark.slow  # an emcee posterior and its evidence ladder, twice: ~1 min on 2 cores
+def test_compare_with_ti_evidence_on_a_dask_cluster_sends_the_rungs_there_and_gives_the_in_process_json(
+        record, cluster):
+    from distributed import Client, get_task_stream
+
+    a = compare(record, ["dahl"], engines=("mcmc",), progress=False)
+    with Client(cluster) as client, get_task_stream(client) as stream:
+        b = compare(record, ["dahl"], engines=("mcmc",), progress=False, executor=client)
+    assert len(stream.data) == 1 + 7  # the fit, and the reference ladder's 7 rungs between β = 0 and 1
+    assert a["evidence_route"] == b["evidence_route"] == "ti"
+    assert json.dumps(_jsonable(_no_walls(a["rows"])), sort_keys=True) == \
+        json.dumps(_jsonable(_no_walls(b["rows"])), sort_keys=True)
+
+
 def test_compare_on_a_process_pool_gives_the_in_process_json_and_reports_each_fit(record, pool):
     messages = []
     a = compare(record, MODELS, engines=("lsq",), progress=False)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from ..executor import job_executor
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
 from .lsq import LSQResult, LSQSettings, fit_lsq
@@ -86,11 +87,16 @@ class Emcee:
         ``"ti"``: thermodynamic integration over a temperature ladder, with
         stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
         cheap route.
+    executor : object, optional
+        Runs the evidence ladder's rungs (``concurrent.futures`` or a dask
+        Client; same numbers). A fit that itself runs on a Dask worker sends
+        them to its cluster without it (:func:`bayes_mr.executor.job_executor`).
     """
 
     settings: object | None = None
     evidence: str = "ti"
     name: str = "mcmc"
+    executor: object | None = None
 
     def __post_init__(self):
         if self.evidence not in ("ti", "laplace"):
@@ -106,7 +112,8 @@ class Emcee:
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
         chain = fit_mcmc(likelihood, lsq=res, settings=settings)
         if self.evidence == "ti":
-            routes = evidence_routes(likelihood, lsq=res, posterior=chain, seed=seed)
+            with job_executor(self.executor) as ex:  # the ladder's rungs: on the cluster the fit runs on, if any
+                routes = evidence_routes(likelihood, lsq=res, posterior=chain, seed=seed, executor=ex)
         else:
             routes = {"laplace": laplace_evidence(res)}
         return mcmc_posterior(likelihood, chain, res, evidence=routes)

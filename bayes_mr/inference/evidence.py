@@ -191,6 +191,7 @@ def evidence_routes(
     path: str = "reference",
     betas: np.ndarray | None = None,
     seed: int = 0,
+    executor=None,
 ) -> dict[str, Evidence]:
     """Laplace, TI and stepping-stone evidence of an OutputError posterior.
 
@@ -205,6 +206,8 @@ def evidence_routes(
     path : {"reference", "prior"}
     betas : ndarray, optional
     seed : int
+    executor : object, optional
+        Runs the ladder's rungs as jobs (:func:`bayes_mr.inference.ladder.run_ladder`).
 
     Returns
     -------
@@ -219,6 +222,7 @@ def evidence_routes(
         lsq = fit_lsq(lik, LSQSettings(seed=seed))
     if posterior is None:
         posterior = fit_mcmc(lik, lsq=lsq, settings=mcmc_settings or MCMCSettings(seed=seed))
-    ladder = run_ladder(lik, posterior, path=path, betas=betas, settings=ladder_settings, seed=seed)
+    ladder = run_ladder(lik, posterior, path=path, betas=betas, settings=ladder_settings, seed=seed,
+                        executor=executor)
     return {"laplace": laplace_evidence(lsq), "ti": thermodynamic_integration(ladder),
             "ss": stepping_stone(ladder)}

@@ -10,8 +10,19 @@
 
 β = 1 is the posterior chain itself, β = 0 is drawn exactly (iid from the
 prior or from q), and every temperature between is an emcee chain
-(:func:`bayes_mr.inference.mcmc.sample` with :data:`LADDER_SETTINGS`) whose
-walkers start where the chain of the temperature above ended.
+(:func:`bayes_mr.inference.mcmc.sample` with :data:`LADDER_SETTINGS`).
+Where its walkers start depends on the path:
+
+* reference path: every rung starts from the posterior's last walkers. Each
+  p_β = q^(1−β) (p L)^β lies between q — a Gaussian fitted to the posterior —
+  and the posterior, so those walkers are already typical there, and the
+  rungs are independent jobs: they run one after another in process or side
+  by side on an executor (:mod:`bayes_mr.executor`), with the same numbers
+  either way (each rung's seed is its own child of the ladder's seed);
+* prior path: the walkers of each rung start where the chain of the rung
+  above ended (the power posteriors spread from the posterior to the prior
+  box over 20 rungs; a rung near β = 0 started at the posterior would need a
+  long burn-in), so these rungs run in order, in process.
 :func:`mean_variance` is the Monte Carlo variance of a rung's mean of g that
 both thermodynamic integration and stepping-stone use.
 """
@@ -25,6 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..executor import run_jobs, share
 from ..stats import integrated_times
 from .mcmc import MCMCResult, MCMCSettings, sample
 
@@ -243,6 +255,7 @@ def run_ladder(
     settings: MCMCSettings = LADDER_SETTINGS,
     n_exact: int = 4000,
     seed: int | np.random.SeedSequence = 0,
+    executor=None,
 ) -> Ladder:
     """Sample g at every temperature of the ladder.
 
@@ -263,6 +276,11 @@ def run_ladder(
     n_exact : int
         Exact draws at β = 0 (from the prior or from q).
     seed : int or SeedSequence
+    executor : object, optional
+        Runs the reference path's rungs as jobs (a ``concurrent.futures``
+        executor or a ``dask.distributed.Client``); the ladder is the same as
+        in process. Not with a ``backend`` (one HDF5 file cannot take writes
+        from several processes); the prior path's chained rungs ignore it.
 
     Returns
     -------
@@ -288,16 +306,44 @@ def run_ladder(
     g_top = tp.g_from_lp(post, lp_post, 1.0)
     g[K], tau[K], chains[K] = g_top, _tau(g_top), posterior
     g[0] = _exact_rung(tp, target, path, n_exact, np.random.default_rng(exact_seq))[:, None]
-    start = post[-1]
-    for k in range(K - 1, 0, -1):
-        s = replace(settings, seed=temp_seqs[k])
-        res = sample(tp.density(float(betas[k])), start.mean(axis=0), np.eye(start.shape[1]), s,
-                     initial=start, group=f"ti_{k:02d}")
-        pk = res.chain[res.burn:]
-        gk = tp.g_from_lp(pk, res.log_prob[res.burn:], float(betas[k]))
+    rungs = list(range(K - 1, 0, -1))
+    settings_k = {k: replace(settings, seed=temp_seqs[k]) for k in rungs}
+    for k, res in zip(rungs, _run_rungs(tp, betas, rungs, post[-1], settings_k, executor)):
+        gk = tp.g_from_lp(res.chain[res.burn:], res.log_prob[res.burn:], float(betas[k]))
         g[k], tau[k], chains[k] = gk, _tau(gk), res
-        start = res.chain[-1]
     return Ladder(betas, g, tau, path, extra, extra_var, chains, _time.perf_counter() - t0)
+
+
+def _run_rungs(tp: _Path, betas: np.ndarray, rungs: list[int], top: np.ndarray, settings_k: dict, executor) -> list:
+    """The chains of ``rungs`` (indices into ``betas``, top down), from the posterior's last walkers ``top``.
+
+    Reference path: independent jobs (:func:`bayes_mr.executor.run_jobs`, on ``executor`` if given);
+    prior path: in order, each rung from where the one above ended.
+    """
+    if tp.kind == "reference":
+        if executor is not None and any(s.backend is not None for s in settings_k.values()):
+            raise ValueError("a ladder on an executor cannot share one HDF5 backend between its rungs")
+        ref = share(executor, tp)
+        jobs = [(ref, float(betas[k]), top, settings_k[k], f"ti_{k:02d}") for k in rungs]
+        outcomes = run_jobs(rung_chain, jobs, executor=executor)
+        failed = [o.error for o in outcomes if not o.ok]
+        if failed:
+            raise RuntimeError(f"ladder rung failed: {failed[0]}")
+        return [o.value for o in outcomes]
+    done, start = [], top
+    for k in rungs:
+        done.append(rung_chain(tp, float(betas[k]), start, settings_k[k], f"ti_{k:02d}"))
+        start = done[-1].chain[-1]
+    return done
+
+
+def rung_chain(tp: _Path, beta: float, start: np.ndarray, settings: MCMCSettings, group: str) -> MCMCResult:
+    """The emcee chain of one temperature β, its walkers starting at ``start`` (n_walkers, d).
+
+    Module level with picklable arguments: a job for :func:`bayes_mr.executor.run_jobs`.
+    """
+    return sample(tp.density(beta), start.mean(axis=0), np.eye(start.shape[1]), settings, initial=start,
+                  group=group)
 
 
 def _top_rung(target, posterior: MCMCResult, path: str, ref_seq) -> tuple[Reference | None, np.ndarray, np.ndarray]:

@@ -26,7 +26,7 @@ from numba import prange
 
 from .._jit import driver, hot
 from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, advance, channel, deriv, rate, substeps
-from .unscented_kernel import cholesky, moments, sigma_points
+from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
 
 # status codes of a run
 OK = 0
@@ -50,24 +50,6 @@ def observe(lay, cst, th, t, a, s, ds, y):
     f_r, f_d = deriv(lay, cst, th, t, a, s, ds)
     for q in range(y.shape[0]):
         y[q] = channel(lay, cst, th, a, s, f_r, lay[L_OBS + q])
-
-
-@hot
-def _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, phi, th):
-    for q in range(tmpl.shape[0]):
-        th[q] = tmpl[q]
-    for j in range(free_idx.shape[0]):
-        v = phi[j]
-        if v < phi_lo[j]:
-            v = phi_lo[j]
-        elif v > phi_hi[j]:
-            v = phi_hi[j]
-        c = is_log[j]  # Coordinates.code: 1 log, 2 signed-log (asinh), 0 linear
-        if c == 1:
-            v = math.exp(v)
-        elif c == 2:
-            v = math.sinh(v)
-        th[free_idx[j]] = v / scale[j]
 
 
 @hot(inline="always")
@@ -101,8 +83,8 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     if jit < 0:
         return CHOL_FAILED, 0, 0
     lam = 0.0
+    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, TH)
     for i in range(nsig):
-        _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
         deriv(lay, cst, TH[i], t, a0, X[i, :ns], K1[i])
         if lay[L_KIND] == DEVICE:
             vmax = max(abs(a0[1]), abs(a1[1]))
@@ -148,8 +130,8 @@ def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     jit = sigma_points(m, P, S, Pj, X, spread, L)
     if jit < 0:
         return CHOL_FAILED, 0, 0.0
+    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, TH)
     for i in range(nsig):
-        _theta(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, X[i, ns:], TH[i])
         observe(lay, cst, TH[i], t1, a1, X[i, :ns], dsbuf, Y[i])
         for q in range(ny):
             if not math.isfinite(Y[i, q]):

@@ -101,6 +101,10 @@ def bench_section(r: dict) -> str:
                  (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, within "
                   f"{r['boucwen_mcmc_max_z']:.1f} sd{'' if r['boucwen_mcmc_converged'] else ' (NOT converged)'}",
                   f"{r['boucwen_mcmc_s']:.0f} s")]
+    if "compare_s" in r:
+        where = f"{r['compare_workers']} workers" if r["compare_workers"] else "in process"
+        rows.append((f"compare, {r['compare_record']}, TI evidence ({where}; selected {r['compare_selected']})",
+                     f"{r['compare_s'] / 60:.1f} min"))
     lines = ["| measured | value |", "|---|---|"] + [f"| {a} | {b} |" for a, b in rows]
     lines.append("")
     lines.append(f"UKF model: {r['ukf_model']}; {r['threads']} threads. Written by `bayes-mr bench`.")

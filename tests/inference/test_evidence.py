@@ -68,6 +68,20 @@ def test_reference_path_ti_and_stepping_stone_match_the_analytic_evidence(gaussi
     assert ti.ladder_error < ti.mc_error  # a Gaussian reference makes the integrand nearly flat
 
 
+def test_reference_rungs_on_an_executor_give_the_in_process_ladder(gaussian_case):
+    """The reference path's rungs are independent jobs: on a pool they give the same chains, bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    target, post, _ = gaussian_case
+    betas = np.array([0.0, 0.1, 0.4, 1.0])
+    here = run_ladder(target, post, betas=betas, seed=3)
+    with ThreadPoolExecutor(2) as pool:
+        there = run_ladder(target, post, betas=betas, seed=3, executor=pool)
+    for a, b in zip(here.chains[1:-1], there.chains[1:-1]):
+        np.testing.assert_array_equal(a.chain, b.chain)
+    assert thermodynamic_integration(here).log_z == thermodynamic_integration(there).log_z
+
+
 def test_a_checkpointed_ladder_resumes_to_the_same_evidence(gaussian_case, tmp_path):
     """Every temperature is a group of one HDF5 file; rerunning with resume=True redoes nothing."""
     from dataclasses import replace as _replace

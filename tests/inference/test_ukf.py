@@ -10,6 +10,7 @@ from bayes_mr.data.schema import make_record
 from bayes_mr.inference import ukf
 from bayes_mr.likelihood import OutputError
 from bayes_mr.inference import ukf_kernel as K
+from bayes_mr.inference import unscented_kernel as U
 from bayes_mr.inference.sigma import MerweScaled
 from bayes_mr.models import get_model
 from bayes_mr.simulate import Inputs, simulate
@@ -193,3 +194,33 @@ def test_sensor_delay_is_refused_with_a_clear_reason():
     rec, _ = structure_record("dahl", {}, n=500)
     with pytest.raises(ValueError, match="sensor_delay"):
         ukf.make_problem(OutputError("dahl+sensor_delay", rec))
+
+
+def test_sigma_point_parameters_equal_each_point_mapped_on_its_own():
+    """θ of the sigma points (one exponential per pair, clipped points direct) = each row of X mapped by
+    Coordinates.to_theta after clipping to the box, to rounding; log, signed-log and linear coordinates."""
+    rng = np.random.default_rng(4)
+    ns, npf = 3, 4
+    L = ns + npf
+    is_log = np.array([1, 2, 0, 1], np.int64)
+    free_idx = np.array([4, 0, 2, 5], np.int64)
+    scale = np.array([1.0, 2.0, 0.5, 1e3])
+    lo, hi = np.full(npf, -3.0), np.full(npf, 3.0)
+    tmpl = rng.standard_normal(7)
+    for case in range(20):
+        m = rng.normal(0.0, 1.5, L)
+        A = rng.standard_normal((L, L)) * rng.uniform(0.05, 1.5)
+        P = A @ A.T + 1e-3 * np.eye(L)
+        if case % 4 == 0:
+            P[ns + 2, :] = P[:, ns + 2] = 0.0  # a parameter column of S zero below its diagonal
+            P[ns + 2, ns + 2] = 0.3
+        S, Pj, X = np.zeros((L, L)), np.zeros((L, L)), np.zeros((2 * L + 1, L))
+        spread = 2.6
+        assert U.sigma_points(m, P, S, Pj, X, spread, L) == 0
+        TH = np.zeros((2 * L + 1, tmpl.size))
+        U.sigma_thetas(tmpl, free_idx, is_log, scale, lo, hi, m, S, spread, ns, TH)
+        phi = np.clip(X[:, ns:], lo, hi)
+        v = np.where(is_log == 1, np.exp(phi), np.where(is_log == 2, np.sinh(phi), phi)) / scale
+        want = np.tile(tmpl, (2 * L + 1, 1))
+        want[:, free_idx] = v
+        np.testing.assert_allclose(TH, want, rtol=1e-14, atol=0)
