@@ -59,15 +59,13 @@ from scipy import optimize
 from .. import noise_model
 from ..likelihood import OutputError
 from ..stats import hac_bandwidth
-from .subfit import LinearSubfit, candidates, linear_names
+from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen, stiff
 
-__all__ = ["LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance", "laplace",
-           "linear_names"]
+__all__ = ["STIFF_FRACTION", "LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance",
+           "laplace", "linear_names"]
 
 #: Ljung–Box p-value above which a whitened residual counts as white (no HAC sandwich needed).
 WHITE_P = 0.01
-#: Share of sample intervals at the search's sub-step cap above which a parameter set is too stiff to start from.
-STIFF_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -192,13 +190,6 @@ def _standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndar
     return lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))[lik.valid] / sd
 
 
-def _stiff(schedule: np.ndarray, cap: int | None) -> np.ndarray:
-    """Whether each simulation (rows of ``schedule``) saturates the sub-step ``cap`` too often to start from."""
-    if cap is None:
-        return np.zeros(schedule.shape[0], bool)
-    return np.mean(schedule >= cap, axis=1) > STIFF_FRACTION
-
-
 class _Residuals:
     """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian.
 
@@ -217,7 +208,7 @@ class _Residuals:
         yhat, sim = self.lik.predict(phi, **self.options)
         self.schedule = sim.schedule[0]
         r = _standardised(self.lik, yhat[0], self.sd)
-        if not sim.ok[0] or not np.all(np.isfinite(r)) or _stiff(sim.schedule[:1], self.cap)[0]:
+        if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
             # a diverged (or, while searching, too stiff) simulation is a very bad fit, not a crash
             worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
             return np.full(r.size, worst)
@@ -316,7 +307,7 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
     # the cost cap matters where evaluations are expensive: the race on a long record's head (a short record
     # keeps the kernel's own sub-step range, so its starts are what they always were)
     cap = settings.search_substeps if race else None
-    starts = _screen(lik, settings, cap)
+    starts = screen(lik, settings.n_candidates, settings.n_starts, settings.seed, cap)
     say(f"screened {settings.n_candidates + 1} candidates")
     runs = [{"start": i + 1, "phi0": phi0, "phi": phi0, "cost": np.inf, "nfev": 0, "status": 0, "message": ""}
             for i, phi0 in enumerate(starts)]
@@ -332,26 +323,6 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
         alive = sorted(alive, key=lambda r: r["cost"])[: (len(alive) + 1) // 2]
         budget *= 2
     return runs
-
-
-def _screen(lik: OutputError, settings: LSQSettings, cap: int | None) -> list[np.ndarray]:
-    """The ``n_starts`` best candidates: by the convex sub-fit's force misfit, else by simulation (in one
-    parallel batch, at most ``cap`` sub-steps per interval; too stiff ones rejected unless all are)."""
-    cands = candidates(lik, settings.n_candidates, settings.seed)
-    sub = LinearSubfit(lik) if linear_names(lik) else None
-    if sub is not None:
-        scored = [sub.solve(c)[::-1] for c in cands]
-    else:
-        yhat, sim = lik.predict(cands, **({} if cap is None else {"n_max": int(cap)}))
-        err = np.where(lik.valid[None, :, None], (lik.y[None] - yhat) / lik.noise_sd, 0.0)
-        cost = np.sum(err**2, axis=(1, 2)) / max(int(lik.valid.sum()), 1)
-        ok = sim.ok & np.isfinite(cost)
-        stiff = _stiff(sim.schedule, cap)
-        cost = np.where(ok & ~stiff, cost, np.inf) if np.any(ok & ~stiff) else np.where(ok, cost, np.inf)
-        scored = list(zip(cost, cands))
-    order = sorted(range(len(scored)), key=lambda i: scored[i][0])
-    starts = [scored[i][1] for i in order[: settings.n_starts] if np.isfinite(scored[i][0])]
-    return starts or [cands[0]]
 
 
 def _ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:

@@ -244,7 +244,8 @@ BW_FORCED = {"c": 200.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0,
 
 
 def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
-    from bayes_mr.inference.lsq import _Residuals, _screen
+    from bayes_mr.inference.lsq import _Residuals
+    from bayes_mr.inference.subfit import screen
 
     lik = OutputError("bouc-wen", _forced_bouc_wen(BW_FORCED, seed=1))
     names = list(lik.par.names)
@@ -260,7 +261,7 @@ def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
     r = _Residuals(lik, lik.noise_sd, cap=32)(corner)
     assert np.all(r == r[0]) and r[0] > 1e3  # scored as a diverged simulation: the optimiser steps away
     assert np.all(np.isfinite(_Residuals(lik, lik.noise_sd)(corner)))  # uncapped it is a (costly) finite fit
-    starts = _screen(lik, LSQSettings(n_starts=4), cap=32)
+    starts = screen(lik, 48, 4, 0, cap=32)
     _, sims = lik.predict(np.array(starts), n_max=32)
     assert np.all(np.mean(sims.schedule >= 32, axis=1) <= 0.1)
 
