@@ -56,7 +56,13 @@ def _period_time(rec) -> float:
 
 
 def cross_validation(rec, held_out: tuple[int, ...], seed: int) -> tuple[list[dict], dict]:
-    """Forward-chaining CV of ``bouc-wen`` by least squares; rows per held-out period and the last fit."""
+    """Forward-chaining CV of ``bouc-wen`` by least squares; rows per held-out period and the last fit.
+
+    Each row scores the held-out period against the measured displacement
+    (noisy: its floor is the record's ~8 µm noise) and, as a check only,
+    against the benchmark's true system simulated under the same force — the
+    noise-free output the published test RMSEs are scored on.
+    """
     rows, last = [], None
     for h in held_out:
         train = rec.isel(time=slice(0, (h - 1) * PERIOD))
@@ -66,8 +72,13 @@ def cross_validation(rec, held_out: tuple[int, ...], seed: int) -> tuple[list[di
         wall = _time.perf_counter() - t0
         scored = rec.isel(time=slice(0, h * PERIOD))
         v = validate(idata, scored, warmup=(h - 1) * _period_time(rec))
+        point = {**results.summary_of(idata).extra.get("fixed", {}), **results.point_of(idata)}
+        sl = slice((h - 1) * PERIOD, h * PERIOD)
+        gap = predict("bouc-wen", scored, point)["displacement"][sl] - predict("bouc-wen", scored, TRUTH)[
+            "displacement"][sl]
         rows.append({"trained on periods": f"1-{h - 1}", "held-out period": h,
-                     "held-out RMSE [m]": v["rmse"]["displacement"], "lsq wall [s]": round(wall, 1)})
+                     "held-out RMSE [m]": v["rmse"]["displacement"],
+                     "RMSE vs true system [m]": float(np.sqrt(np.mean(gap**2))), "lsq wall [s]": round(wall, 1)})
         last = idata
     return rows, {"idata": last, "held_out": held_out[-1]}
 
@@ -112,19 +123,27 @@ def _figures(fig_dir: Path, rec, idata, held_out: int) -> None:
                  fig_dir / "hysteresis.png")
 
 
-def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool = False, seed: int = 0) -> dict:
-    """Run the study; write ``report.md``, tables (CSV) and figures; return the summary."""
+def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool = False, seed: int = 0,
+         engines: tuple[str, ...] | None = None, held_out: tuple[int, ...] | None = None) -> dict:
+    """Run the study; write ``report.md``, tables (CSV) and figures; return the summary.
+
+    ``engines`` (default: lsq when ``quick``, else lsq, mcmc and ukf) and ``held_out`` periods of the
+    cross-validation (default: 5 when ``quick``, else 3, 4 and 5) override the ``quick`` choice.
+    """
     out = Path(out_dir)
     (out / "figures").mkdir(parents=True, exist_ok=True)
     rec = load_packaged("boucwen-benchmark")
-    engines = ("lsq",) if quick else ("lsq", "mcmc", "ukf")
+    engines = engines or (("lsq",) if quick else ("lsq", "mcmc", "ukf"))
+    held_out = held_out or ((5,) if quick else (3, 4, 5))
+    t0 = _time.perf_counter()
     cmp = compare(rec, FORMS, engines=engines, seed=seed, progress=False)
+    compare_s = _time.perf_counter() - t0
     forms = table(cmp)
     forms.to_csv(out / "forms.csv", index=False)
     fits = {e: cmp["idata"][("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp["idata"]}
     params = parameter_table(fits)
     params.to_csv(out / "parameters.csv", index=False)
-    cv_rows, last = cross_validation(rec, (5,) if quick else (3, 4, 5), seed)
+    cv_rows, last = cross_validation(rec, held_out, seed)
     cv = pd.DataFrame(cv_rows)
     cv.to_csv(out / "cross_validation.csv", index=False)
     _figures(out / "figures", rec, last["idata"], last["held_out"])
@@ -132,7 +151,11 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
     lit = pd.DataFrame([{"method": m, "reference": r, "multisine test RMSE [m]": v, "scored on": "published test set"}
                         for m, r, v in PUBLISHED]
                        + [{"method": "bouc-wen, least squares (this package)", "reference": "this study",
-                           "multisine test RMSE [m]": ours, "scored on": "held-out period 5 of the training record"}])
+                           "multisine test RMSE [m]": ours,
+                           "scored on": f"held-out period {held_out[-1]} of the training record (measured, noisy)"},
+                          {"method": "bouc-wen, least squares (this package)", "reference": "this study (check)",
+                           "multisine test RMSE [m]": cv_rows[-1]["RMSE vs true system [m]"],
+                           "scored on": f"held-out period {held_out[-1]}: the true system's noise-free output"}])
     lines = ["# The Bouc–Wen hysteretic benchmark", "",
              "The benchmark's published test sets are **not shipped**; every held-out figure below is a held-out "
              "period of the training record.", "",
@@ -145,6 +168,8 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
     (out / "report.md").write_text("\n".join(lines) + "\n")
     return {"report": str(out / "report.md"), "selected": cmp["selected"],
             "bayes_factors": cmp["bayes_factors"], "held_out_rmse": ours,
+            "held_out_rmse_vs_truth": cv_rows[-1]["RMSE vs true system [m]"], "compare_s": compare_s,
+            "forms": forms.to_dict(orient="records"), "parameters": params.to_dict(orient="records"),
             "max_abs_z": {e: float(params[params.engine == e]["|z|"].max()) for e in fits},
             "cross_validation": cv_rows}
 

@@ -10,11 +10,20 @@
    weighted by the noise SD of each channel, then re-weighted once by the
    residual RMS (the maximum-likelihood σ_c when σ is unknown). On a long
    record (more than ``head_samples`` samples) steps 1–2 run on the record's
-   head, each start with an eighth of ``max_nfev``, and only the best start
-   is refined further, on the head and then on the whole record: the search
-   among starts needs the dynamics, not every period of a stationary test
-   (the Bouc–Wen benchmark's 40,960 samples: 300 s → 115 s of CPU), and the
+   head and the starts race (successive halving): each gets an eighth of
+   ``max_nfev``, the better half continues with twice the budget, and so on
+   until one is left, which is refined on the whole record. The search among
+   starts needs the dynamics, not every period of a stationary test, and a
+   ranking after a few evaluations is unreliable (a start still far from its
+   optimum may be in the right basin), so starts are dropped gradually; the
    estimate, its covariance and evidence are still the whole record's.
+   While racing, simulations get at most ``search_substeps`` RK4
+   sub-steps per sample interval, and a candidate or start whose simulation
+   saturates that cap on more than :data:`STIFF_FRACTION` of the intervals is
+   rejected as a start (its dynamics are far faster than the sampling
+   resolves; simulating it with the kernel's 400 sub-steps costs 30–90 s per
+   evaluation on the Bouc–Wen benchmark). Only the final refinement
+   simulates with the kernel's full sub-step range.
 3. **Laplace approximation** at the optimum: Cov(φ) = (JᵀJ)⁻¹ with J the
    Jacobian of the σ̂-standardised residuals (central differences on a
    replayed sub-step schedule). Residuals of a dynamic model are
@@ -50,10 +59,10 @@ from scipy import optimize
 from .. import noise_model
 from ..likelihood import OutputError
 from ..stats import hac_bandwidth
-from .subfit import LinearSubfit, candidates, linear_names
+from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen, stiff
 
-__all__ = ["LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance", "laplace",
-           "linear_names"]
+__all__ = ["STIFF_FRACTION", "LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance",
+           "laplace", "linear_names"]
 
 #: Ljung–Box p-value above which a whitened residual counts as white (no HAC sandwich needed).
 WHITE_P = 0.01
@@ -80,6 +89,11 @@ class LSQSettings:
         Records longer than this search among starts on their first
         ``head_samples`` samples and refine the best on the whole record
         (None: every start on the whole record).
+    search_substeps : int or None
+        Most RK4 sub-steps per sample interval while a long record's starts
+        are screened and raced on its head; a parameter set saturating it on
+        more than :data:`STIFF_FRACTION` of the intervals is rejected as a
+        start (None: the kernel's own maximum, nothing rejected).
     """
 
     n_candidates: int = 48
@@ -88,6 +102,7 @@ class LSQSettings:
     seed: int = 0
     reweight: bool = True
     head_samples: int | None = 8192
+    search_substeps: int | None = 32
 
 
 @dataclass
@@ -176,19 +191,25 @@ def _standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndar
 
 
 class _Residuals:
-    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian."""
+    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian.
 
-    def __init__(self, lik: OutputError, sd: np.ndarray):
+    ``cap``: most sub-steps per sample interval (the search's cost cap); a
+    simulation saturating it too often counts as a diverged one.
+    """
+
+    def __init__(self, lik: OutputError, sd: np.ndarray, cap: int | None = None):
         self.lik = lik
         self.sd = np.asarray(sd, float)
         self.schedule = None
+        self.options = {} if cap is None else {"n_max": int(cap)}
+        self.cap = cap
 
     def __call__(self, phi):
-        yhat, sim = self.lik.predict(phi)
+        yhat, sim = self.lik.predict(phi, **self.options)
         self.schedule = sim.schedule[0]
         r = _standardised(self.lik, yhat[0], self.sd)
-        if not sim.ok[0] or not np.all(np.isfinite(r)):
-            # a diverged simulation is a very bad fit (worse than predicting zero), not a crash
+        if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
+            # a diverged (or, while searching, too stiff) simulation is a very bad fit, not a crash
             worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
             return np.full(r.size, worst)
         return r.ravel()
@@ -220,8 +241,9 @@ class _Residuals:
         return J
 
 
-def _refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int) -> optimize.OptimizeResult:
-    res_fn = _Residuals(lik, sd)
+def _refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
+            cap: int | None = None) -> optimize.OptimizeResult:
+    res_fn = _Residuals(lik, sd, cap)
     lo, hi = lik.phi_lo, lik.phi_hi
     x0 = np.clip(phi0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     return optimize.least_squares(
@@ -253,13 +275,11 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         runs = _search(lik, settings, say, settings.max_nfev)
         phi = min(runs, key=lambda r: r["cost"])["phi"]
     else:
-        # starts get an eighth of the evaluations on the head (a start far off in a stiff corner of the box
-        # costs many sub-steps per evaluation), the best one the rest, then the whole record
+        # the starts race on the head (an eighth of the evaluations each, then the better half twice as many, …)
         head = _head(lik, settings.head_samples)
-        runs = _search(head, settings, say, max(settings.max_nfev // 8, 1))
-        phi = _refine(head, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
-        phi = _refine(lik, phi, sd, settings.max_nfev).x
-        say(f"best start refined on the first {settings.head_samples}, then on all {n} samples")
+        runs = _search(head, settings, say, max(settings.max_nfev // 8, 1), race=True)
+        phi = _refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
+        say(f"best start (raced on the first {settings.head_samples} samples) refined on all {n}")
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
@@ -277,27 +297,31 @@ def _head(lik: OutputError, n: int) -> OutputError:
                        noise_sd=lik.noise_sd, scales=lik.scales)
 
 
-def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int) -> list[dict]:
-    """Steps 1–2 of the module docstring: screen candidates, refine the best ``n_starts``; one dict per start."""
-    cands = candidates(lik, settings.n_candidates, settings.seed)
-    sub = LinearSubfit(lik) if linear_names(lik) else None
-    scored = []
-    for c in cands:
-        if sub is not None:
-            c, cost = sub.solve(c)
-        else:
-            yhat, sim = lik.predict(c)
-            cost = float(np.mean(((lik.y - yhat[0])[lik.valid] / lik.noise_sd) ** 2)) if sim.ok[0] else np.inf
-        scored.append((cost, c))
-    scored.sort(key=lambda t: t[0])
-    say(f"screened {len(cands)} candidates")
-    starts = [c for cost, c in scored[: settings.n_starts] if np.isfinite(cost)] or [cands[0]]
-    runs = []
-    for i, phi0 in enumerate(starts):
-        res = _refine(lik, phi0, lik.noise_sd.copy(), max_nfev)
-        runs.append({"phi0": phi0, "phi": res.x, "cost": float(res.cost), "nfev": int(res.nfev),
-                     "status": int(res.status), "message": str(res.message)})
-        say(f"start {i + 1}/{len(starts)}: cost {res.cost:.4g}")
+def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: bool = False) -> list[dict]:
+    """Steps 1–2 of the module docstring: screen candidates, refine the best ``n_starts``; one dict per start.
+
+    ``race``: successive halving — every start gets ``max_nfev`` evaluations,
+    the better half continues with twice as many, until one start is left.
+    Otherwise every start gets ``max_nfev`` once.
+    """
+    # the cost cap matters where evaluations are expensive: the race on a long record's head (a short record
+    # keeps the kernel's own sub-step range, so its starts are what they always were)
+    cap = settings.search_substeps if race else None
+    starts = screen(lik, settings.n_candidates, settings.n_starts, settings.seed, cap)
+    say(f"screened {settings.n_candidates + 1} candidates")
+    runs = [{"start": i + 1, "phi0": phi0, "phi": phi0, "cost": np.inf, "nfev": 0, "status": 0, "message": ""}
+            for i, phi0 in enumerate(starts)]
+    alive, budget = list(runs), max_nfev
+    while alive:
+        for run in alive:
+            res = _refine(lik, run["phi"], lik.noise_sd.copy(), budget, cap)
+            run.update(phi=res.x, cost=float(res.cost), nfev=run["nfev"] + int(res.nfev), status=int(res.status),
+                       message=str(res.message))
+            say(f"start {run['start']}/{len(runs)}: cost {res.cost:.4g} after {run['nfev']} evaluations")
+        if not race or len(alive) == 1:
+            break
+        alive = sorted(alive, key=lambda r: r["cost"])[: (len(alive) + 1) // 2]
+        budget *= 2
     return runs
 
 

@@ -7,7 +7,8 @@ regressors Φ(t), and min ‖Φ θ_lin − f‖² over the plausible box is a sm
 bounded convex problem, solved with cvxpy (CLARABEL). The force target is the
 measured force (device test) or −m·(absolute acceleration) (structure test).
 :func:`candidates` gives the Latin-hypercube candidates it screens
-(:func:`bayes_mr.inference.lsq.fit_lsq`).
+(:func:`bayes_mr.inference.lsq.fit_lsq`), and :func:`screen` ranks them into
+starts, with a sub-step cost cap (:func:`stiff`) where simulating is expensive.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ LINEAR_FORM = {
     "spencer": (),
 }
 LINEAR_EFFECT = ("f0", "k3", "c_v")
+#: Share of sample intervals at a search's sub-step cap above which a parameter set is too stiff to start from.
+STIFF_FRACTION = 0.1
 #: The form coefficient that scales the hysteretic force (not linear with a series dashpot).
 HYSTERETIC_COEF = {"normalized-bouc-wen": "k_z", "dahl": "F_d", "lugre": "beta"}
 
@@ -175,3 +178,35 @@ def candidates(lik: OutputError, n: int, seed: int) -> np.ndarray:
     coords = lik.par.coords
     default = np.clip(default, coords.lower, coords.upper)
     return np.vstack([coords.to_phi(default), lik.phi_lo + u * (lik.phi_hi - lik.phi_lo)])
+
+
+def stiff(schedule: np.ndarray, cap: int | None) -> np.ndarray:
+    """Whether each simulation (rows of ``schedule``) saturates the sub-step ``cap`` too often to start from."""
+    if cap is None:
+        return np.zeros(schedule.shape[0], bool)
+    return np.mean(schedule >= cap, axis=1) > STIFF_FRACTION
+
+
+def screen(lik: OutputError, n_candidates: int, n_starts: int, seed: int, cap: int | None) -> list[np.ndarray]:
+    """The ``n_starts`` best of :func:`candidates` (``n_candidates``, ``seed``) as starts φ.
+
+    Ranked by the convex sub-fit's force misfit where the force is linear in
+    some parameters, else by the simulated output misfit (one parallel batch,
+    at most ``cap`` sub-steps per interval; candidates that :func:`stiff`
+    rejects are dropped unless all are). Diverged candidates are dropped.
+    """
+    cands = candidates(lik, n_candidates, seed)
+    sub = LinearSubfit(lik) if linear_names(lik) else None
+    if sub is not None:
+        scored = [sub.solve(c)[::-1] for c in cands]
+    else:
+        yhat, sim = lik.predict(cands, **({} if cap is None else {"n_max": int(cap)}))
+        err = np.where(lik.valid[None, :, None], (lik.y[None] - yhat) / lik.noise_sd, 0.0)
+        cost = np.sum(err**2, axis=(1, 2)) / max(int(lik.valid.sum()), 1)
+        ok = sim.ok & np.isfinite(cost)
+        too_stiff = stiff(sim.schedule, cap)
+        cost = np.where(ok & ~too_stiff, cost, np.inf) if np.any(ok & ~too_stiff) else np.where(ok, cost, np.inf)
+        scored = list(zip(cost, cands))
+    order = sorted(range(len(scored)), key=lambda i: scored[i][0])
+    starts = [scored[i][1] for i in order[: n_starts] if np.isfinite(scored[i][0])]
+    return starts or [cands[0]]

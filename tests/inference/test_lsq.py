@@ -224,3 +224,57 @@ def test_laplace_evidence_gives_an_unidentified_parameter_nothing():
     # the bound itself: an exactly flat direction contributes the box width, a sharp one √(2π)σ
     vol = posterior_log_volume(np.diag([1e6, 0.0]), np.array([10.0, 3.0]))
     assert vol == pytest.approx(0.5 * np.log(2 * np.pi / 1e6) + np.log(3.0))
+
+
+# --- long records: starts raced on the head, with a sub-step cost cap ------------------------------------------
+
+def _forced_bouc_wen(truth: dict, seed: int, fs: float = 500.0, duration: float = 2.0):
+    """A forced Bouc–Wen test (displacement only, 1 % noise) under a ramped 2–21 Hz multisine force."""
+    from bayes_mr.simulate import synthesize
+
+    t = np.arange(0.0, duration, 1.0 / fs)
+    rng = np.random.default_rng(seed)
+    force = 20.0 * sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in (2.0, 5.0, 9.0, 14.0, 21.0))
+    m = get_model("bouc-wen")
+    return synthesize(m, m.theta("forced", truth), t, {"applied_force": force * np.clip(t / 0.1, 0, 1)},
+                      noise=0.01, seed=seed + 10, outputs=("displacement",))
+
+
+BW_FORCED = {"c": 200.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0, "m": 2.0}
+
+
+def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
+    from bayes_mr.inference.lsq import _Residuals
+    from bayes_mr.inference.subfit import screen
+
+    lik = OutputError("bouc-wen", _forced_bouc_wen(BW_FORCED, seed=1))
+    names = list(lik.par.names)
+    # a stiff corner of the box: the lightest mass on the stiffest spring and damper (the law at the truth)
+    corner = lik.par.coords.to_phi(np.array([BW_FORCED[n] for n in names]))
+    for name, bound in (("c", lik.phi_hi), ("k", lik.phi_hi), ("m", lik.phi_lo)):
+        corner[names.index(name)] = bound[names.index(name)]
+    _, full = lik.predict(corner)
+    assert full.ok[0] and np.mean(full.schedule[0] > 32) > 0.5  # it needs up to the kernel's 400 per sample
+    # capped, it saturates the cap or (RK4 past its stability limit) diverges within a few samples: cheap either way
+    _, sim = lik.predict(corner, n_max=32)
+    assert (not sim.ok[0]) or np.mean(sim.schedule[0] >= 32) > 0.1
+    r = _Residuals(lik, lik.noise_sd, cap=32)(corner)
+    assert np.all(r == r[0]) and r[0] > 1e3  # scored as a diverged simulation: the optimiser steps away
+    assert np.all(np.isfinite(_Residuals(lik, lik.noise_sd)(corner)))  # uncapped it is a (costly) finite fit
+    starts = screen(lik, 48, 4, 0, cap=32)
+    _, sims = lik.predict(np.array(starts), n_max=32)
+    assert np.all(np.mean(sims.schedule >= 32, axis=1) <= 0.1)
+
+
+@pytest.mark.parametrize("gamma", [-1100.0, 300.0])
+def test_raced_starts_on_the_head_recover_forced_bouc_wen(gamma):
+    truth = {**BW_FORCED, "gamma": gamma}
+    lik = OutputError("bouc-wen", _forced_bouc_wen(truth, seed=2))
+    messages = []
+    res = fit_lsq(lik, LSQSettings(head_samples=400), progress=messages.append)
+    assert any("raced on the first 400" in m for m in messages)
+    # successive halving: 4 starts → 2 → 1, the survivor has had the most evaluations
+    nfev = sorted(r["nfev"] for r in res.starts)
+    assert len(res.starts) == 4 and nfev[-1] > nfev[0]
+    for name, true in truth.items():
+        assert abs(res.theta[name] - true) < 3 * res.sd_theta[name], (name, res.theta[name], res.sd_theta[name])
