@@ -22,7 +22,11 @@
    the uncertainty many times over; the reported covariance is the
    heteroskedasticity-and-autocorrelation-consistent sandwich
    (JᵀJ)⁻¹ Ω (JᵀJ)⁻¹ with a Bartlett-weighted Ω (Newey & West 1987) whose
-   bandwidth is where the residual autocorrelation dies out. The evidence is
+   bandwidth is where the residual autocorrelation dies out. When the
+   record's input is measured with noise, the sandwich's middle is widened,
+   direction by direction, to that of replicas of the model's response to the
+   input noise (errors in variables, :mod:`.calibrate`): a Bartlett middle
+   with a bandwidth the record can afford misses most of it. The evidence is
    ln Z ≈ ln p(y|φ̂,σ̂) + ln p(φ̂) + ln p(σ̂) + ½(d+c) ln 2π + ½ ln|Σ_φ| − ½ Σ_c ln(2 N_c),
    with the same priors as :class:`~bayes_mr.likelihood.OutputError`.
 4. **Under the AR residual model** (``OutputError(..., residual="ar")``,
@@ -50,6 +54,7 @@ from scipy import optimize
 from .. import noise_model
 from ..likelihood import OutputError
 from ..stats import hac_bandwidth
+from . import calibrate
 from .subfit import LinearSubfit, candidates, linear_names
 
 __all__ = ["LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance", "laplace",
@@ -80,6 +85,9 @@ class LSQSettings:
         Records longer than this search among starts on their first
         ``head_samples`` samples and refine the best on the whole record
         (None: every start on the whole record).
+    input_noise_replicas : int
+        Replicas of the response to the input's noise in the covariance's
+        middle (:mod:`.calibrate`); 0 keeps the HAC/GLS covariance alone.
     """
 
     n_candidates: int = 48
@@ -88,6 +96,7 @@ class LSQSettings:
     seed: int = 0
     reweight: bool = True
     head_samples: int | None = 8192
+    input_noise_replicas: int = calibrate.N_DRAWS
 
 
 @dataclass
@@ -101,7 +110,8 @@ class LSQResult:
     theta : dict
         Optimum, name → value [SI] (free parameters).
     cov_phi : ndarray (p, p)
-        Covariance of φ (autocorrelation-consistent sandwich).
+        Covariance of φ (autocorrelation-consistent sandwich; with noise on
+        the record's input, its middle widened by the input-noise replicas).
     cov_phi_iid : ndarray (p, p)
         (JᵀJ)⁻¹: the covariance if residuals were independent.
     sd_theta : dict
@@ -112,6 +122,9 @@ class LSQResult:
         At the optimum, and the Laplace evidence.
     starts : list of dict
         Each start: initial φ, final φ, cost, nfev, status.
+    input_noise : dict or None
+        :func:`.calibrate.replica_middle`'s info when the input's noise
+        entered the covariance (``input_share`` per channel, ``n_replicas``).
     """
 
     phi: np.ndarray
@@ -126,6 +139,7 @@ class LSQResult:
     wall_s: float = 0.0
     hac_lag: int = 0
     whiteness_p: float | None = None
+    input_noise: dict | None = None
 
 
 
@@ -267,7 +281,8 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
         res = _refine(lik, phi, sd, settings.max_nfev)
         phi = res.x
-    return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0)
+    return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
+                   replicas=settings.input_noise_replicas)
 
 
 def _head(lik: OutputError, n: int) -> OutputError:
@@ -349,8 +364,14 @@ def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
     return float(np.sum(np.minimum(gauss, box)))
 
 
-def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0) -> LSQResult:
-    """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model."""
+def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0,
+            replicas: int = calibrate.N_DRAWS) -> LSQResult:
+    """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model.
+
+    When the record's input carries noise, the covariance's middle is the
+    larger (direction by direction) of the HAC/GLS one and that of ``replicas``
+    replicas of the model's response to the input noise (:mod:`.calibrate`).
+    """
     yhat, _ = lik.predict(phi)
     resid = (lik.y - yhat[0])[lik.valid]
     n_c = resid.shape[0]
@@ -379,6 +400,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         cov, lag = cov_iid, 0  # the AR model whitened the residual: GLS needs no sandwich
     else:
         cov, lag = hac_covariance(J, r, n_c)
+    cov, eiv = _with_input_noise(lik, phi, J, sigma, cov, replicas)
     log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo)))
     log_z = loglik + log_prior + log_volume + occam
     if sampled:
@@ -403,4 +425,14 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         wall_s=wall_s,
         hac_lag=lag,
         whiteness_p=p_white,
+        input_noise=eiv,
     )
+
+
+def _with_input_noise(lik: OutputError, phi, J, sigma, cov, replicas: int) -> tuple[np.ndarray, dict | None]:
+    """``cov`` with the input-noise replicas' middle where that is larger (:mod:`.calibrate`)."""
+    if replicas <= 0 or not calibrate.input_noise_sd(lik):
+        return cov, None
+    omega, info = calibrate.replica_middle(lik, phi, J, sigma, n=replicas)
+    B = J.T @ J
+    return calibrate.sandwich(J, calibrate.loewner_max(omega, B @ cov @ B)), info
