@@ -173,3 +173,19 @@ def adjust_draws(phi: np.ndarray, center: np.ndarray, cov_model: np.ndarray, cov
     A = half_t @ inv_half_m
     c = np.asarray(center, float)
     return c + (np.asarray(phi, float) - c) @ A.T
+
+
+def describe(res, channels: tuple[str, ...]) -> dict:
+    """The fit JSON's ``uncertainty``: how a least-squares result's covariance was made.
+
+    ``covariance``: ``gls`` ((JᵀJ)⁻¹ of whitened residuals found white),
+    ``hac`` (the Bartlett sandwich) or ``hac+input_noise`` (its middle
+    widened by the input-noise replicas); with the replicas, ``input_share``
+    (channel → fraction of the residual variance the input noise explains)
+    and ``n_replicas``.
+    """
+    kind = "gls" if res.hac_lag == 0 and res.whiteness_p is not None else "hac"
+    if res.input_noise is None:
+        return {"covariance": kind}
+    return {"covariance": kind + "+input_noise", "n_replicas": res.input_noise["n_replicas"],
+            "input_share": dict(zip(channels, res.input_noise["input_share"]))}

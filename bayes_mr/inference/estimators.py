@@ -25,7 +25,7 @@ import xarray as xr
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
 from .lsq import LSQResult, LSQSettings, fit_lsq
-from . import ukf
+from . import calibrate, ukf
 from .ukf import TAUS, UKFSettings
 
 
@@ -67,7 +67,7 @@ class LeastSquares:
             coords={"param": list(coords.names)})
         info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
-                "draws_clipped": n_clipped}
+                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels)}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info,
                          groups={"lsq_starts": starts} if starts is not None else {},

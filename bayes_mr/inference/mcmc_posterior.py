@@ -6,7 +6,7 @@ import numpy as np
 import xarray as xr
 
 from .base import Posterior, even_indices
-from .calibrate import adjust_draws
+from .calibrate import adjust_draws, describe
 from .evidence import Evidence, select_route
 from .mcmc import MCMCResult
 
@@ -70,6 +70,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)
+        info["uncertainty"] = {**describe(lsq, lik.channels), "draws": "mapped to least squares' covariance"}
     names = list(lik.names)
     return Posterior(
         engine="mcmc", draws=coords.to_theta(x[:, :, :p]), point=point,
