@@ -168,6 +168,9 @@ class UKF:
         ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
                          run["final_cov_phi"].values, self.settings)
         phi, cov = ref["phi"], ref["cov"]
+        # the filter's covariance ignores how the input noise and the residual's correlation spread an
+        # output-error estimate; never report less than least squares' calibrated sandwich at this point
+        cov, uncertainty = calibrate.at_least_sandwich(likelihood, phi, cov)
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
         x = draws_phi
@@ -181,7 +184,7 @@ class UKF:
             "validation_mse": float(validation["mse"].sel(run=sel)),
             "validated_on": str(validation.attrs.get("source", "")),
             "interrupted": int(training.attrs["interrupted"]), "training_wall_s": float(training.attrs["wall_s"]),
-            "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"],
+            "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"], "uncertainty": uncertainty,
         }
         return Posterior(
             engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,
