@@ -24,7 +24,7 @@ import xarray as xr
 
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
-from .lsq import LSQResult, LSQSettings, fit_lsq
+from .lsq import LSQResult, LSQSettings, fit_lsq, laplace
 from . import calibrate, ukf
 from .ukf import TAUS, UKFSettings
 
@@ -168,9 +168,12 @@ class UKF:
         ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
                          run["final_cov_phi"].values, self.settings)
         phi, cov = ref["phi"], ref["cov"]
-        # the filter's covariance ignores how the input noise and the residual's correlation spread an
-        # output-error estimate; never report less than least squares' calibrated sandwich at this point
-        cov, uncertainty = calibrate.at_least_sandwich(likelihood, phi, cov)
+        # the filter's covariance was up to ~2x narrower than the spread of output-error estimates under
+        # input noise (studies/coverage.py): never report less than least squares' calibrated sandwich here
+        lap = laplace(likelihood, phi)
+        cov = calibrate.loewner_max(cov, lap.cov_phi)
+        uncertainty = calibrate.describe(lap, likelihood.channels)
+        uncertainty["covariance"] = f"max(filter, {uncertainty['covariance']} at the point)"
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
         x = draws_phi
