@@ -18,7 +18,9 @@
 #
 # Records are short (6 s at 250 Hz, 1,500 samples) and the engines' budgets small (emcee: stop at
 # 20 autocorrelation times or 3,000 steps; UKF: 3 LHS × 2 τ priors instead of 10 × 10, then its two
-# refinement passes), so the whole study — 6 truths per form — runs in about half an hour on 2 cores.
+# refinement passes). Measured under a shared load (~20 runnable processes on 2 cores): per record about
+# 10 s per least-squares fit, 45 s per emcee fit, 2–5 s per UKF fit; the 18 records (6 per form) about 70 min
+# there, less on an idle machine.
 #
 # Run: `bayes-mr study coverage` (`--quick`: 2 truths per form, lsq and the UKF only).
 

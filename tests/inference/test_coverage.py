@@ -88,7 +88,7 @@ def test_loewner_max_is_the_larger_in_every_direction():
 @pytest.mark.slow
 def test_every_engine_covers_80_to_97_percent():
     """The full coverage study (6 truths per form × 3 forms, lsq/emcee under iid and AR, the UKF): every
-    engine × residual model holds the truth inside its 90 % interval 80–97 % of the time. ~40 min on 2 cores."""
+    engine × residual model holds the truth inside its 90 % interval 80–97 % of the time. ~1 h on 2 cores."""
     study = _study()
     members = [m for form in study.CENTRES for m in study.family(form, study.PER_FORM, seed=0)]
     rows, failed = study.run(members, study.estimators(quick=False), say=lambda msg: None)
