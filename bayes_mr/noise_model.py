@@ -306,3 +306,22 @@ def describe(resid: np.ndarray, valid: np.ndarray, model: ResidualModel, channel
         v = np.asarray(valid, bool)
         out["n_eff"] = {c: v.sum() / residual_time(resid[v, j]) for j, c in enumerate(channels)}
     return out
+
+
+def apply_filter(resid: np.ndarray, valid: np.ndarray, orders: tuple[int, ...],
+                 coefs: list[np.ndarray]) -> np.ndarray:
+    """Prewhiten residuals (B, N, C) with *given* AR coefficients (one (p_c,) array per channel).
+
+    The linear map :func:`whiten` applies with the coefficients it profiles,
+    held fixed: what a perturbation of the residual (a noise replica) becomes
+    in the likelihood's whitened coordinates. Zero where not :func:`usable`.
+    """
+    e = np.where(np.asarray(valid, bool)[None, :, None], np.asarray(resid, float), 0.0)
+    out = np.zeros(e.shape)
+    for c, p in enumerate(orders):
+        use = usable(valid, p)
+        w = e[:, :, c].copy()
+        for k in range(p):
+            w[:, k + 1:] -= coefs[c][k] * e[:, : e.shape[1] - k - 1, c]
+        out[:, :, c] = np.where(use[None], w, 0.0)
+    return out

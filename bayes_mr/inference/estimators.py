@@ -25,8 +25,8 @@ import xarray as xr
 from ..executor import job_executor
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
-from .lsq import LSQResult, LSQSettings, fit_lsq
-from . import ukf
+from .lsq import LSQResult, LSQSettings, fit_lsq, laplace
+from . import calibrate, ukf
 from .ukf import TAUS, UKFSettings
 
 
@@ -68,7 +68,7 @@ class LeastSquares:
             coords={"param": list(coords.names)})
         info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
-                "draws_clipped": n_clipped}
+                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels)}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info,
                          groups={"lsq_starts": starts} if starts is not None else {},
@@ -175,6 +175,12 @@ class UKF:
         ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
                          run["final_cov_phi"].values, self.settings)
         phi, cov = ref["phi"], ref["cov"]
+        # the filter's covariance was up to ~2x narrower than the spread of output-error estimates under
+        # input noise (studies/coverage.py): never report less than least squares' calibrated sandwich here
+        lap = laplace(likelihood, phi)
+        cov = calibrate.loewner_max(cov, lap.cov_phi)
+        uncertainty = calibrate.describe(lap, likelihood.channels)
+        uncertainty["covariance"] = f"max(filter, {uncertainty['covariance']} at the point)"
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
         x = draws_phi
@@ -188,7 +194,7 @@ class UKF:
             "validation_mse": float(validation["mse"].sel(run=sel)),
             "validated_on": str(validation.attrs.get("source", "")),
             "interrupted": int(training.attrs["interrupted"]), "training_wall_s": float(training.attrs["wall_s"]),
-            "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"],
+            "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"], "uncertainty": uncertainty,
         }
         return Posterior(
             engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,

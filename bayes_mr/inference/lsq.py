@@ -31,7 +31,11 @@
    the uncertainty many times over; the reported covariance is the
    heteroskedasticity-and-autocorrelation-consistent sandwich
    (JᵀJ)⁻¹ Ω (JᵀJ)⁻¹ with a Bartlett-weighted Ω (Newey & West 1987) whose
-   bandwidth is where the residual autocorrelation dies out. The evidence is
+   bandwidth is where the residual autocorrelation dies out. When the
+   record's input is measured with noise, the sandwich's middle is widened,
+   direction by direction, to that of replicas of the model's response to the
+   input noise (errors in variables, :mod:`.calibrate`): a Bartlett middle
+   with a bandwidth the record can afford misses most of it. The evidence is
    ln Z ≈ ln p(y|φ̂,σ̂) + ln p(φ̂) + ln p(σ̂) + ½(d+c) ln 2π + ½ ln|Σ_φ| − ½ Σ_c ln(2 N_c),
    with the same priors as :class:`~bayes_mr.likelihood.OutputError`.
 4. **Under the AR residual model** (``OutputError(..., residual="ar")``,
@@ -58,7 +62,8 @@ from scipy import optimize
 
 from .. import noise_model
 from ..likelihood import OutputError
-from ..stats import hac_bandwidth
+from . import calibrate
+from .calibrate import hac_covariance
 from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen, stiff
 
 __all__ = ["STIFF_FRACTION", "LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance",
@@ -94,6 +99,9 @@ class LSQSettings:
         are screened and raced on its head; a parameter set saturating it on
         more than :data:`STIFF_FRACTION` of the intervals is rejected as a
         start (None: the kernel's own maximum, nothing rejected).
+    input_noise_replicas : int
+        Replicas of the response to the input's noise in the covariance's
+        middle (:mod:`.calibrate`); 0 keeps the HAC/GLS covariance alone.
     """
 
     n_candidates: int = 48
@@ -103,6 +111,7 @@ class LSQSettings:
     reweight: bool = True
     head_samples: int | None = 8192
     search_substeps: int | None = 32
+    input_noise_replicas: int = calibrate.N_DRAWS
 
 
 @dataclass
@@ -116,7 +125,8 @@ class LSQResult:
     theta : dict
         Optimum, name → value [SI] (free parameters).
     cov_phi : ndarray (p, p)
-        Covariance of φ (autocorrelation-consistent sandwich).
+        Covariance of φ (autocorrelation-consistent sandwich; with noise on
+        the record's input, its middle widened by the input-noise replicas).
     cov_phi_iid : ndarray (p, p)
         (JᵀJ)⁻¹: the covariance if residuals were independent.
     sd_theta : dict
@@ -127,6 +137,9 @@ class LSQResult:
         At the optimum, and the Laplace evidence.
     starts : list of dict
         Each start: initial φ, final φ, cost, nfev, status.
+    input_noise : dict or None
+        :func:`.calibrate.replica_middle`'s info when the input's noise
+        entered the covariance (``input_share`` per channel, ``n_replicas``).
     """
 
     phi: np.ndarray
@@ -141,47 +154,14 @@ class LSQResult:
     wall_s: float = 0.0
     hac_lag: int = 0
     whiteness_p: float | None = None
+    input_noise: dict | None = None
 
 
 
 # --- covariance -------------------------------------------------------------------------
 
-def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, int]:
-    """Sandwich covariance (JᵀJ)⁻¹ Ω (JᵀJ)⁻¹ with a Bartlett-weighted Ω.
-
-    Parameters
-    ----------
-    J : ndarray, shape (n_t · c, p)
-        Jacobian of the standardised residuals, rows ordered (time, channel).
-    r : ndarray, shape (n_t · c,)
-        Standardised residuals, same order.
-    n_t : int
-        Number of time samples.
-
-    Returns
-    -------
-    cov : ndarray (p, p)
-    lag : int
-        Bandwidth used [samples].
-    """
-    p = J.shape[1]
-    c = r.size // n_t
-    g = (J * r[:, None]).reshape(n_t, c, p).sum(axis=1)  # score contribution of each sample
-    lag = hac_bandwidth(r.reshape(n_t, c), max_lag=min(n_t // 4, 5000))
-    m = 2 * n_t
-    G = np.fft.rfft(g, m, axis=0)
-    omega = np.zeros((p, p))
-    for a in range(p):
-        for b in range(a, p):
-            cc = np.fft.irfft(G[:, a] * np.conj(G[:, b]), m)  # cc[l] = Σ_t g_a[t] g_b[t−l]
-            w = 1.0 - np.arange(lag + 1) / (lag + 1)
-            val = cc[0] + np.sum(w[1:] * (cc[1: lag + 1] + cc[m - lag:][::-1]))
-            omega[a, b] = omega[b, a] = val
-    bread = np.linalg.pinv(J.T @ J)
-    return bread @ omega @ bread, lag
-
-
 # --- nonlinear least squares -----------------------------------------------------------
+
 
 def _standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
     """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
@@ -287,7 +267,8 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
         res = _refine(lik, phi, sd, settings.max_nfev)
         phi = res.x
-    return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0)
+    return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
+                   replicas=settings.input_noise_replicas)
 
 
 def _head(lik: OutputError, n: int) -> OutputError:
@@ -373,8 +354,14 @@ def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
     return float(np.sum(np.minimum(gauss, box)))
 
 
-def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0) -> LSQResult:
-    """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model."""
+def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0,
+            replicas: int = calibrate.N_DRAWS) -> LSQResult:
+    """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model.
+
+    When the record's input carries noise, the covariance's middle is the
+    larger (direction by direction) of the HAC/GLS one and that of ``replicas``
+    replicas of the model's response to the input noise (:mod:`.calibrate`).
+    """
     yhat, _ = lik.predict(phi)
     resid = (lik.y - yhat[0])[lik.valid]
     n_c = resid.shape[0]
@@ -403,6 +390,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         cov, lag = cov_iid, 0  # the AR model whitened the residual: GLS needs no sandwich
     else:
         cov, lag = hac_covariance(J, r, n_c)
+    cov, eiv = _with_input_noise(lik, phi, J, sigma, cov, replicas)
     log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo)))
     log_z = loglik + log_prior + log_volume + occam
     if sampled:
@@ -427,4 +415,14 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         wall_s=wall_s,
         hac_lag=lag,
         whiteness_p=p_white,
+        input_noise=eiv,
     )
+
+
+def _with_input_noise(lik: OutputError, phi, J, sigma, cov, replicas: int) -> tuple[np.ndarray, dict | None]:
+    """``cov`` with the input-noise replicas' middle where that is larger (:mod:`.calibrate`)."""
+    if replicas <= 0 or not calibrate.input_noise_sd(lik):
+        return cov, None
+    omega, info = calibrate.replica_middle(lik, phi, J, sigma, n=replicas)
+    B = J.T @ J
+    return calibrate.sandwich(J, calibrate.loewner_max(omega, B @ cov @ B)), info

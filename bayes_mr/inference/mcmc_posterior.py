@@ -6,6 +6,7 @@ import numpy as np
 import xarray as xr
 
 from .base import Posterior, even_indices
+from .calibrate import adjust_draws, describe
 from .evidence import Evidence, select_route
 from .mcmc import MCMCResult
 
@@ -33,13 +34,20 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     -------
     Posterior
         Draws (chain = walker, draw) from the post-burn-in chain thinned by
-        ``result.thin``; the point is the maximum-posterior step after burn-in;
+        ``result.thin`` — with ``lsq``, mapped about its optimum to its
+        calibrated covariance (:func:`~bayes_mr.inference.calibrate.adjust_draws`;
+        ``lp`` stays the sampled draws' log posterior); the point is the maximum-posterior step after burn-in;
         ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate.
     """
     p = lik.n_params
     coords = lik.par.coords
     kept = result.chain[result.burn:: result.thin]  # (n_draw, W, d)
     x = np.moveaxis(kept, 1, 0)  # (W, n_draw, d)
+    if lsq is not None:
+        # the chain samples the likelihood's own curvature; give it least squares' calibrated
+        # covariance (input noise, autocorrelation), keeping its shape (calibrate.adjust_draws)
+        x = x.copy()
+        x[..., :p] = adjust_draws(x[..., :p], lsq.phi, lsq.cov_phi_iid, lsq.cov_phi)
     # the point the engine stands behind: the highest posterior density visited after burn-in
     post_lp = result.log_prob[result.burn:]
     i, w = np.unravel_index(int(np.argmax(post_lp)), post_lp.shape)
@@ -62,6 +70,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)
+        info["uncertainty"] = {**describe(lsq, lik.channels), "draws": "mapped to least squares' covariance"}
     names = list(lik.names)
     return Posterior(
         engine="mcmc", draws=coords.to_theta(x[:, :, :p]), point=point,

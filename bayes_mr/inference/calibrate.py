@@ -1,0 +1,231 @@
+"""Honest parameter covariance under noise on the measured input (errors in variables), for every engine.
+
+The output-error likelihood (:class:`~bayes_mr.likelihood.OutputError`)
+compares the measured outputs with the model driven by the *recorded* input.
+When the input itself is measured with noise w (a structure's ground
+acceleration, a forced test's applied force, a device test's imposed motion),
+the residual at the true θ is not the measurement noise v alone but
+
+    r = G(θ) w + v,
+
+the model's response to the input noise — smooth, correlated and
+concentrated in the band the parameters are identified from — plus v. An iid
+(or AR by BIC) likelihood sees mostly v: on simulated structure tests with
+2 % input and output noise the least-squares estimates scatter 2–3× wider than
+(JᵀJ)⁻¹ says and ~2× wider than the Bartlett HAC sandwich (bandwidth-limited)
+says; the MCMC posterior, sampling the same likelihood, is as narrow as (JᵀJ)⁻¹.
+
+The cure used here is the sandwich with a *model-based* middle:
+
+    Cov(φ̂) = B⁻¹ Ω B⁻¹,  B = JᵀJ,  Ω = E[(Jᵀ r)(Jᵀ r)ᵀ],
+
+with J the Jacobian of the standardised (under AR: prewhitened) residual and
+Ω estimated by Monte Carlo from :data:`N_DRAWS` replicas r_k = W(G w_k + v_k)/σ̂:
+the model at the estimate driven by the recorded input plus a fresh draw w_k
+of the input noise (its SD from the record, as the UKF's process noise reads
+it: :func:`~bayes_mr.likelihood.channel_noise`), minus the model on the recorded
+input, plus white measurement noise v_k of the variance the residual has left
+over, passed through the same AR prewhitening W as the residual. This is the
+linearised parametric bootstrap of the estimator: no refits, K simulations.
+Where model error makes the empirical HAC middle larger in some direction,
+that direction keeps the larger one (:func:`loewner_max`), so the correction
+never narrows what the data's own residual says.
+
+Every engine reads it: least squares reports it as ``cov_phi``; the MCMC
+draws are adjusted to it (:func:`adjust_draws`: an affine map about the
+posterior mode whose image has this covariance, the curvature adjustment of
+Ribatet, Cooley & Davison 2012 and Shaby 2014); the UKF, whose filter carries
+the input noise as process noise but still came out up to ~2× too narrow,
+reports :func:`loewner_max` of its filter covariance and least squares'
+sandwich at its own point (``inference/estimators.py``). Measured by
+``studies/coverage.py``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..likelihood import OutputError, channel_noise
+from ..simulate import DRIVE
+from ..stats import hac_bandwidth
+
+#: Monte Carlo replicas of the input-noise response (Ω's relative SD error ≈ √(2/K) per element).
+N_DRAWS = 200
+
+
+def input_noise_sd(lik: OutputError) -> dict[int, float]:
+    """SD of the noise on each measured input column of the kernel rows [input units].
+
+    Structure and forced tests: the drive (column 0); device tests: the
+    imposed displacement (0) and velocity (1). Read from the record's
+    ``noise_sd_<channel>`` attribute, else the noise-floor estimate; an input
+    with no such attribute on a record simulated without noise gets 0.
+    """
+    kind = lik.kind
+    names = (DRIVE[kind],) if kind != "device" else ("displacement", "velocity")
+    if not all(n in lik.record for n in names):
+        return {}
+    if lik.record.attrs.get("noise_fraction", None) == 0.0:
+        return {}
+    sd = channel_noise(lik.record, names)
+    return {col: float(s) for col, s in enumerate(sd) if np.isfinite(s) and s > 0}
+
+
+def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Responses of the model at φ to ``n`` fresh draws of the input noise, shape (n, N, C) [channel units].
+
+    ŷ(φ; u + w_k) − ŷ(φ; u) on the record's sample grid, the simulation's
+    sub-steps replayed so the difference is the input's effect alone. Zeros
+    when the record's input has no noise.
+    """
+    sds = input_noise_sd(lik)
+    base, sim = lik.predict(np.atleast_2d(phi))
+    out = np.zeros((n,) + base.shape[1:])
+    if not sds:
+        return out
+    theta = lik.par.full(np.atleast_2d(phi))
+    from ..simulate import simulate
+
+    for k in range(n):
+        rows = lik.inputs.rows.copy()
+        for col, sd in sds.items():
+            rows[:, col] += rng.normal(0.0, sd, rows.shape[0])
+        s = simulate(lik.model, replace(lik.inputs, rows=rows), theta, schedule=sim.schedule)
+        if not s.ok[0]:
+            continue  # a replica that diverges says nothing about small perturbations
+        out[k] = np.stack([s[c][0] for c in lik.channels], axis=-1) - base[0]
+    return out
+
+
+def replica_middle(lik: OutputError, phi: np.ndarray, J: np.ndarray, sigma: np.ndarray, *,
+                   n: int = N_DRAWS, seed: int = 0) -> tuple[np.ndarray, dict]:
+    """Ω = E[(Jᵀ r)(Jᵀ r)ᵀ] over replicas r of the standardised residual (module docstring).
+
+    Parameters
+    ----------
+    J : ndarray, shape (n_valid · C, p)
+        Jacobian of the standardised (prewhitened) residual, rows (time, channel).
+    sigma : ndarray (C,)
+        The σ_c the residual is standardised by [channel units].
+
+    Returns
+    -------
+    omega : ndarray (p, p)
+    info : dict
+        ``input_share``: per channel, the fraction of the residual variance
+        the input noise explains; ``n_replicas``.
+    """
+    rng = np.random.default_rng(seed)
+    yhat, _ = lik.predict(np.atleast_2d(phi))
+    resid = np.where(lik.valid[:, None], lik.y - yhat[0], 0.0)
+    e = response_replicas(lik, phi, n, rng)
+    v = lik.valid
+    var_r = np.mean(resid[v] ** 2, axis=0)
+    var_e = np.mean(e[:, v] ** 2, axis=(0, 1))
+    sd_v = np.sqrt(np.maximum(var_r - var_e, 0.0))
+    e = e + rng.normal(size=e.shape) * sd_v
+    if lik.residual.kind == "ar" and lik.residual.resolved:
+        from ..noise_model import apply_filter, whiten
+
+        _, coefs = whiten(resid[None], v, lik.residual.orders)
+        e = apply_filter(e, v, lik.residual.orders, [a[0] for a in coefs])
+    r = (e[:, v] / sigma).reshape(n, -1)
+    s = r @ J  # (n, p) score of each replica
+    omega = s.T @ s / n
+    return omega, {"input_share": (var_e / np.maximum(var_r, 1e-300)).tolist(), "n_replicas": n}
+
+
+def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, int]:
+    """Sandwich covariance (JᵀJ)⁻¹ Ω (JᵀJ)⁻¹ with a Bartlett-weighted Ω.
+
+    Parameters
+    ----------
+    J : ndarray, shape (n_t · c, p)
+        Jacobian of the standardised residuals, rows ordered (time, channel).
+    r : ndarray, shape (n_t · c,)
+        Standardised residuals, same order.
+    n_t : int
+        Number of time samples.
+
+    Returns
+    -------
+    cov : ndarray (p, p)
+    lag : int
+        Bandwidth used [samples].
+    """
+    p = J.shape[1]
+    c = r.size // n_t
+    g = (J * r[:, None]).reshape(n_t, c, p).sum(axis=1)  # score contribution of each sample
+    lag = hac_bandwidth(r.reshape(n_t, c), max_lag=min(n_t // 4, 5000))
+    m = 2 * n_t
+    G = np.fft.rfft(g, m, axis=0)
+    omega = np.zeros((p, p))
+    for a in range(p):
+        for b in range(a, p):
+            cc = np.fft.irfft(G[:, a] * np.conj(G[:, b]), m)  # cc[l] = Σ_t g_a[t] g_b[t−l]
+            w = 1.0 - np.arange(lag + 1) / (lag + 1)
+            val = cc[0] + np.sum(w[1:] * (cc[1: lag + 1] + cc[m - lag:][::-1]))
+            omega[a, b] = omega[b, a] = val
+    bread = np.linalg.pinv(J.T @ J)
+    return bread @ omega @ bread, lag
+
+
+def loewner_max(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest symmetric matrix ≥ both ``a`` (positive definite) and ``b`` along a's eigen-frame of b.
+
+    a^{1/2} max(I, a^{-1/2} b a^{-1/2}) a^{1/2}, the eigenvalues of the
+    middle clipped below at 1: in every direction the larger of the two.
+    """
+    w, u = np.linalg.eigh(0.5 * (a + a.T))
+    w = np.clip(w, 1e-300, None)
+    half, inv_half = (u * np.sqrt(w)) @ u.T, (u / np.sqrt(w)) @ u.T
+    m, q = np.linalg.eigh(inv_half @ (0.5 * (b + b.T)) @ inv_half)
+    return half @ ((q * np.maximum(m, 1.0)) @ q.T) @ half
+
+
+def sandwich(J: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """B⁻¹ Ω B⁻¹ with B = JᵀJ (pseudo-inverse) [φ²]."""
+    bread = np.linalg.pinv(J.T @ J)
+    return bread @ omega @ bread
+
+
+def _sqrt_pair(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric square root of a covariance and of its (pseudo-)inverse."""
+    w, u = np.linalg.eigh(0.5 * (cov + cov.T))
+    w = np.clip(w, 1e-12 * max(float(w.max()), 1e-300), None)
+    return (u * np.sqrt(w)) @ u.T, (u / np.sqrt(w)) @ u.T
+
+
+def adjust_draws(phi: np.ndarray, center: np.ndarray, cov_model: np.ndarray, cov_target: np.ndarray) -> np.ndarray:
+    """Posterior draws of φ (..., p) mapped affinely about ``center`` from the model's to the target covariance.
+
+    φ' = c + A (φ − c), A = Σ_t^{1/2} Σ_m^{-1/2}: a posterior sampled from a
+    likelihood whose curvature is Σ_m⁻¹ (the iid or AR Gauss–Newton
+    information) gets the calibrated covariance Σ_t (least squares'
+    sandwich) while keeping its shape — the curvature adjustment of Ribatet,
+    Cooley & Davison (2012) and Shaby (2014). With Σ_t = Σ_m it is the identity.
+    """
+    half_t, _ = _sqrt_pair(cov_target)
+    _, inv_half_m = _sqrt_pair(cov_model)
+    A = half_t @ inv_half_m
+    c = np.asarray(center, float)
+    return c + (np.asarray(phi, float) - c) @ A.T
+
+
+def describe(res, channels: tuple[str, ...]) -> dict:
+    """The fit JSON's ``uncertainty``: how a least-squares result's covariance was made.
+
+    ``covariance``: ``gls`` ((JᵀJ)⁻¹ of whitened residuals found white),
+    ``hac`` (the Bartlett sandwich) or ``hac+input_noise`` (its middle
+    widened by the input-noise replicas); with the replicas, ``input_share``
+    (channel → fraction of the residual variance the input noise explains)
+    and ``n_replicas``.
+    """
+    kind = "gls" if res.hac_lag == 0 and res.whiteness_p is not None else "hac"
+    if res.input_noise is None:
+        return {"covariance": kind}
+    return {"covariance": kind + "+input_noise", "n_replicas": res.input_noise["n_replicas"],
+            "input_share": dict(zip(channels, res.input_noise["input_share"]))}
+

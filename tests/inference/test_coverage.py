@@ -1,0 +1,99 @@
+"""Calibration: the engines' 90 % intervals hold the truth about 90 % of the time under input noise (issue 14).
+
+The families are the coverage study's (``studies/coverage.py``): simulated structure tests with 1–5 %
+RMS noise on the measured input and on the outputs, truths drawn around the thesis's values.
+"""
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from bayes_mr.cli import studies_dir
+from bayes_mr.inference.calibrate import adjust_draws, input_noise_sd, loewner_max
+from bayes_mr.inference.estimators import LeastSquares
+from bayes_mr.inference.lsq import LSQSettings
+from bayes_mr.likelihood import OutputError
+
+
+def _study():
+    spec = importlib.util.spec_from_file_location("coverage_study", studies_dir() / "coverage.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_least_squares_intervals_hold_the_truth_under_input_noise():
+    """5 Dahl structure tests (20 true parameter values), least squares under iid: at least 15 inside.
+
+    Binomial argument (k = 15 of n = 20): a calibrated engine (p = 0.9) fails with probability 1.1 %; an
+    engine at the old coverage (p ≈ 0.5–0.6 measured on input-noise families) passes with 2–13 %. The
+    parameters of one record are correlated, so the effective n is smaller and the test weaker than that,
+    not stricter. Measured: 18/20 (worst |z| 1.9) with the input-noise sandwich, 13/20 (worst |z| 4.4)
+    with the HAC covariance alone (``input_noise_replicas=0``) on the same fits; ~13 s of CPU.
+    """
+    study = _study()
+    members = study.family("dahl", 5, seed=100)
+    rows, failed = study.run(members, {"lsq": LeastSquares()}, residuals=("iid",), say=lambda msg: None)
+    assert not failed
+    assert len(rows) == 20 and int(rows["inside"].sum()) >= 15, rows[["member", "param", "z"]]
+    assert np.max(np.abs(rows["z"])) < 4.0
+
+
+def test_the_input_noise_widens_least_squares_where_the_hac_middle_misses_it():
+    """On one record with 3 % input noise the calibrated SDs are at least the HAC ones, and wider for some."""
+    from bayes_mr.inference.lsq import fit_lsq
+
+    member = _study().family("dahl", 1, seed=7)[0]
+    lik = OutputError("dahl", member["record"])
+    assert input_noise_sd(lik)  # the record declares its input's noise
+    cal = fit_lsq(lik, LSQSettings())
+    hac = fit_lsq(OutputError("dahl", member["record"]), LSQSettings(input_noise_replicas=0))
+    ratio = np.sqrt(np.diag(cal.cov_phi) / np.diag(hac.cov_phi))
+    assert np.all(ratio >= 1.0 - 1e-9) and ratio.max() > 1.2, ratio
+    assert cal.input_noise is not None and hac.input_noise is None
+
+
+def test_a_record_without_input_noise_keeps_its_covariance():
+    """No noise on the input (``synthesize(noise=0)``): nothing to replicate, the HAC/GLS covariance stays."""
+    from bayes_mr.models import get_model
+    from bayes_mr.signals import make_signal
+    from bayes_mr.simulate import synthesize
+
+    model = get_model("dahl")
+    sig = make_signal("elcentro", scale=0.5, fs=250.0, duration=2.0)
+    rec = synthesize(model, model.theta("structure"), sig.time, sig.as_input("structure"), mass=50.0, noise=0.0)
+    assert input_noise_sd(OutputError("dahl", rec)) == {}
+
+
+def test_adjusted_draws_have_the_target_covariance_and_keep_the_centre():
+    rng = np.random.default_rng(0)
+    model = np.array([[1.0, 0.3], [0.3, 0.5]])
+    target = np.array([[4.0, -0.5], [-0.5, 2.0]])
+    draws = rng.multivariate_normal([1.0, -2.0], model, size=200_000)
+    out = adjust_draws(draws, np.array([1.0, -2.0]), model, target)
+    assert np.allclose(np.cov(out.T), target, rtol=0.02, atol=0.02)
+    assert np.allclose(out.mean(axis=0), [1.0, -2.0], atol=0.02)
+    assert np.allclose(adjust_draws(draws, np.zeros(2), model, model), draws)
+
+
+def test_loewner_max_is_the_larger_in_every_direction():
+    a, b = np.diag([1.0, 4.0]), np.diag([3.0, 2.0])
+    m = loewner_max(a, b)
+    assert np.allclose(m, np.diag([3.0, 4.0]))
+    for u in np.random.default_rng(1).normal(size=(20, 2)):
+        assert u @ m @ u >= max(u @ a @ u, u @ b @ u) - 1e-9
+
+
+@pytest.mark.slow
+def test_every_engine_covers_80_to_97_percent():
+    """The full coverage study (6 truths per form × 3 forms, lsq/emcee under iid and AR, the UKF): every
+    engine × residual model holds the truth inside its 90 % interval 80–97 % of the time. ~1 h on 2 cores."""
+    study = _study()
+    members = [m for form in study.CENTRES for m in study.family(form, study.PER_FORM, seed=0)]
+    rows, failed = study.run(members, study.estimators(quick=False), say=lambda msg: None)
+    table = study.coverage_table(rows)
+    overall = table[table["form"] == "all"]
+    assert len(failed) <= 2, failed
+    for _, r in overall.iterrows():
+        assert 0.80 <= r["coverage"] <= 0.97, overall
