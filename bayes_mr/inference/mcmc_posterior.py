@@ -6,7 +6,7 @@ import numpy as np
 import xarray as xr
 
 from .base import Posterior, even_indices
-from .calibrate import adjust_draws, describe
+from .calibrate import adjust_draws, describe, loewner_max
 from .evidence import Evidence, select_route
 from .mcmc import MCMCResult
 
@@ -34,9 +34,9 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     -------
     Posterior
         Draws (chain = walker, draw) from the post-burn-in chain thinned by
-        ``result.thin`` — with ``lsq``, mapped about its optimum to its
-        calibrated covariance (:func:`~bayes_mr.inference.calibrate.adjust_draws`;
-        ``lp`` stays the sampled draws' log posterior); the point is the maximum-posterior step after burn-in;
+        ``result.thin`` — with ``lsq``, mapped about its optimum from their own
+        covariance to the larger (Loewner) of it and least squares' calibrated
+        one (:func:`~bayes_mr.inference.calibrate.adjust_draws`; ``lp`` stays the sampled draws' log posterior); the point is the maximum-posterior step after burn-in;
         ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate.
     """
     p = lik.n_params
@@ -45,9 +45,12 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     x = np.moveaxis(kept, 1, 0)  # (W, n_draw, d)
     if lsq is not None:
         # the chain samples the likelihood's own curvature; give it least squares' calibrated
-        # covariance (input noise, autocorrelation), keeping its shape (calibrate.adjust_draws)
+        # covariance (input noise, autocorrelation), keeping its shape (calibrate.adjust_draws). The map starts from the chain's own
+        # covariance, not (JᵀJ)⁻¹: where the sampled posterior is wider than its Gauss–Newton curvature
+        # (a curved ridge) that curvature's inverse would amplify the tail, and the chain is never narrowed
         x = x.copy()
-        x[..., :p] = adjust_draws(x[..., :p], lsq.phi, lsq.cov_phi_iid, lsq.cov_phi)
+        cov_chain = np.atleast_2d(np.cov(x[..., :p].reshape(-1, p), rowvar=False))
+        x[..., :p] = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
     # the point the engine stands behind: the highest posterior density visited after burn-in
     post_lp = result.log_prob[result.burn:]
     i, w = np.unravel_index(int(np.argmax(post_lp)), post_lp.shape)
