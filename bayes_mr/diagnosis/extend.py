@@ -70,7 +70,7 @@ def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float], *, c
     start = np.array([theta.get(n, defaults[n]) for n in lik.par.names], float)
     phi = np.clip(lik.par.coords.to_phi(start), lik.phi_lo, lik.phi_hi)
     phi = converge(lik, phi)
-    return _finish(lik, laplace(lik, phi), record)
+    return _finish(lik, laplace(lik, phi, replicas=0), record)
 
 
 def part_nrmse(fit: Fit, record: xr.Dataset, *, chain: bool = False) -> float | None:

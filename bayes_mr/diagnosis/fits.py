@@ -11,11 +11,16 @@ warm-starting the extension at the base optimum with the effect off, and only
 ever moving downhill, guarantees the extension fits at least as well: a
 gain that is not there cannot come from a poor local optimum of the base
 model, and one that is there is found from the effect's own starts.
+
+Diagnose's fits serve scores (evidence, MSE), not reported intervals: their
+covariance is the HAC/GLS one, without the input-noise replicas of
+:mod:`bayes_mr.inference.calibrate` (200 simulations per fit, dozens of fits
+per diagnosis); ``bayes-mr fit`` reports the calibrated one.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import xarray as xr
@@ -143,9 +148,9 @@ def fit_model(record: xr.Dataset, model: Model | str, settings: LSQSettings = LS
     """Least-squares fit of ``model`` from scratch (convex-screened starts, :func:`fit_lsq`),
     taken to the profile-likelihood optimum (:func:`converge`); ``noise`` is the residual model."""
     lik = OutputError(get_model(model), record, residual=noise)
-    res = fit_lsq(lik, settings, progress=progress)
+    res = fit_lsq(lik, replace(settings, input_noise_replicas=0), progress=progress)
     phi = converge(lik, res.phi)
-    return _finish(lik, laplace(lik, phi, starts=res.starts, wall_s=res.wall_s), record)
+    return _finish(lik, laplace(lik, phi, starts=res.starts, wall_s=res.wall_s, replicas=0), record)
 
 
 def costs(lik: OutputError, starts: np.ndarray, sd: np.ndarray) -> np.ndarray:
@@ -199,7 +204,7 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
         raise RuntimeError(f"{lik.model.name}: every start diverged")
     best = min(runs, key=lambda r: r["cost"])
     phi = converge(lik, best["phi"], refined_at=sd, max_nfev=max_nfev)
-    res = laplace(lik, phi)
+    res = laplace(lik, phi, replicas=0)
     return _finish(lik, res, lik.record), [{k: v for k, v in r.items() if k != "phi"} for r in runs]
 
 
