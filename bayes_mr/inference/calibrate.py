@@ -53,6 +53,10 @@ from ..stats import hac_bandwidth
 
 #: Monte Carlo replicas of the input-noise response (Ω's relative SD error ≈ √(2/K) per element).
 N_DRAWS = 200
+#: Fewest replicas (Ω's elements to ≈ 25 %), and the most RK4 sub-steps all replicas together may take:
+#: the count is cut to fit (deterministically, from the simulation's own sub-step schedule) on long or stiff records.
+MIN_DRAWS = 30
+REPLICA_SUBSTEPS = 5.0e7
 
 
 def input_noise_sd(lik: OutputError) -> dict[int, float]:
@@ -82,6 +86,10 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
     """
     sds = input_noise_sd(lik)
     base, sim = lik.predict(np.atleast_2d(phi))
+    if sim.schedule is not None:
+        # Ω's precision is not worth minutes: at most REPLICA_SUBSTEPS RK4 sub-steps of replicas in all
+        # (a stiff point, e.g. a short UKF training's, needs hundreds per sample), never fewer than MIN_DRAWS
+        n = min(n, max(MIN_DRAWS, int(REPLICA_SUBSTEPS // max(int(np.sum(sim.schedule)), 1))))
     out = np.zeros((n,) + base.shape[1:])
     if not sds:
         return out
@@ -121,6 +129,7 @@ def replica_middle(lik: OutputError, phi: np.ndarray, J: np.ndarray, sigma: np.n
     yhat, _ = lik.predict(np.atleast_2d(phi))
     resid = np.where(lik.valid[:, None], lik.y - yhat[0], 0.0)
     e = response_replicas(lik, phi, n, rng)
+    n = e.shape[0]  # fewer on a long or stiff record (REPLICA_SUBSTEPS)
     v = lik.valid
     var_r = np.mean(resid[v] ** 2, axis=0)
     var_e = np.mean(e[:, v] ** 2, axis=(0, 1))
