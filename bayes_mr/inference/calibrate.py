@@ -48,7 +48,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..likelihood import OutputError, channel_noise
-from ..simulate import DRIVE
+from ..simulate import DRIVE, simulate
 from ..stats import hac_bandwidth
 
 #: Monte Carlo replicas of the input-noise response (Ω's relative SD error ≈ √(2/K) per element).
@@ -94,8 +94,6 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
     if not sds:
         return out
     theta = lik.par.full(np.atleast_2d(phi))
-    from ..simulate import simulate
-
     for k in range(n):
         rows = lik.inputs.rows.copy()
         for col, sd in sds.items():
