@@ -116,7 +116,7 @@ def choose(rows: np.ndarray, kind: str, dt: float, declared: str | None = None) 
     Parameters
     ----------
     rows : ndarray, shape (N, 3)
-        Input rows of :class:`bayes_mr.simulate.Inputs`.
+        Input rows of :class:`bayes_mr.inputs.Inputs`.
     kind : {"structure", "device", "forced"}
     dt : float
         Sample interval [s].
@@ -160,7 +160,7 @@ def upsample(rows: np.ndarray, kind: str, s: int) -> np.ndarray:
     Parameters
     ----------
     rows : ndarray, shape (N, 3)
-        Input rows of :class:`bayes_mr.simulate.Inputs` (drive, device
+        Input rows of :class:`bayes_mr.inputs.Inputs` (drive, device
         velocity, command).
     kind : {"structure", "device", "forced"}
         Device tests reconstruct displacement and velocity, the others their

@@ -18,14 +18,14 @@ differences then see the model, not the step control.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from functools import cached_property
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
 from . import input_grid
 from ._specialise import kernel
+from .inputs import COMMANDS, DRIVE, Inputs
 from .models import Model, get_model
 from .models.drivers import run_batch
 
@@ -35,156 +35,6 @@ OUTPUT_NAMES = {
     "device": ("force", "damper_force"),
     "forced": ("displacement", "velocity", "acceleration", "force"),
 }
-#: Input channel that drives each kind of test (a device test is also driven by its velocity).
-DRIVE = {"structure": "ground_acceleration", "device": "displacement", "forced": "applied_force"}
-#: Damper command channels (whichever a record has drives spencer and voltage_dependence).
-COMMANDS = ("voltage", "current")
-
-
-@dataclass(frozen=True)
-class Inputs:
-    """What drives a model: the kernel's input rows on a uniform grid.
-
-    Attributes
-    ----------
-    kind : {"structure", "device", "forced"}
-    dt : float
-        Sample interval [s].
-    rows : ndarray, shape (N, 3)
-        Structure: ground acceleration [m/s²], 0, command;
-        forced: applied force [N], 0, command;
-        device: displacement [m], velocity [m/s], command. The command is the
-        damper's voltage [V] or current [A], whichever the record has.
-    mass : float or None
-        Storey mass [kg] (structure tests); a forced test's mass is its
-        parameter ``m`` (this field only records a known one).
-    interp : {"linear", "bandlimited"}
-        The input between samples (:mod:`bayes_mr.input_grid`): linear, or
-        the drive reconstructed band-limited on a grid :attr:`upsample`
-        times finer (the command column stays linear).
-    """
-
-    kind: str
-    dt: float
-    rows: np.ndarray
-    mass: float | None = None
-    interp: str = "linear"
-
-    def __post_init__(self):
-        if self.interp not in input_grid.INTERPS:
-            raise ValueError(f"Inputs.interp must be one of {', '.join(input_grid.INTERPS)}, got {self.interp!r}")
-
-    @cached_property
-    def upsample(self) -> int:
-        """Simulation steps per sample interval: 1 (linear), else chosen from the drive's bandwidth."""
-        if self.interp == "linear":
-            return 1
-        return input_grid.factor(self.rows, self.kind, self.dt)
-
-    @cached_property
-    def grid_rows(self) -> np.ndarray:
-        """Kernel input rows on the simulation grid ``dt / upsample``, (upsample·(N−1)+1, 3)."""
-        if self.upsample == 1:
-            return self.rows
-        return input_grid.upsample(self.rows, self.kind, self.upsample)
-
-    @property
-    def n(self) -> int:
-        return self.rows.shape[0]
-
-    @property
-    def time(self) -> np.ndarray:
-        return np.arange(self.n) * self.dt
-
-    @cached_property
-    def acceleration(self) -> np.ndarray:
-        """Imposed acceleration ẍ [m/s²] of a device test (what ``inertia`` multiplies).
-
-        The Savitzky–Golay smoothing differentiator of the imposed velocity
-        (:func:`bayes_mr.data.derive.smooth_velocity`, window for the record's
-        bandwidth) — the velocity being itself the same derivative of the
-        imposed displacement when the record had none — so noise on the
-        measured motion is not amplified by a raw second difference.
-        Computed once per input.
-        """
-        from .data.derive import smooth_velocity
-
-        if self.kind != "device":
-            raise ValueError(f"the imposed acceleration is a device-test input, not a {self.kind} test's")
-        return smooth_velocity(self.rows[:, 1], self.dt)
-
-    @classmethod
-    def from_record(cls, record: xr.Dataset, interp: str | None = None) -> "Inputs":
-        """Inputs of a record in the package schema.
-
-        ``interp`` ("linear", "bandlimited"; None or "auto": the record's
-        ``input_interp`` attribute when it has one, else chosen from the
-        drive's bandwidth, :func:`bayes_mr.input_grid.choose`).
-        """
-        kind = record.attrs["kind"]
-        n = record.sizes["time"]
-        rows = np.zeros((n, 3))
-        for name in COMMANDS:
-            if name in record:
-                rows[:, 2] = record[name].values
-                break
-        if kind != "device":
-            rows[:, 0] = record[DRIVE[kind]].values
-            mass = float(record.attrs["mass"]) if "mass" in record.attrs else None
-        else:
-            rows[:, 0] = record["displacement"].values
-            if "velocity" not in record:
-                raise ValueError(
-                    f"{record.attrs.get('source', 'record')}: device test without a velocity channel — "
-                    "read it with bayes_mr.data.load, which derives one"
-                )
-            rows[:, 1] = record["velocity"].values
-            mass = None
-        dt = float(record.attrs["dt"])
-        declared = interp if interp not in (None, "auto") else record.attrs.get("input_interp")
-        return cls(kind, dt, rows, mass, input_grid.choose(rows, kind, dt, declared))
-
-    @classmethod
-    def structure(cls, ground_acceleration, dt: float, mass: float, voltage=None) -> "Inputs":
-        """Structure-test inputs from a ground acceleration [m/s²] sampled every dt [s]."""
-        ag = np.asarray(ground_acceleration, float)
-        rows = np.zeros((ag.size, 3))
-        rows[:, 0] = ag
-        if voltage is not None:
-            rows[:, 2] = voltage
-        return cls("structure", float(dt), rows, float(mass))
-
-    @classmethod
-    def forced(cls, applied_force, dt: float, command=None, mass: float | None = None) -> "Inputs":
-        """Forced-test inputs from an applied force [N] sampled every dt [s] (``mass`` [kg] if known)."""
-        p = np.asarray(applied_force, float)
-        rows = np.zeros((p.size, 3))
-        rows[:, 0] = p
-        if command is not None:
-            rows[:, 2] = command
-        return cls("forced", float(dt), rows, None if mass is None else float(mass))
-
-    @classmethod
-    def device(cls, displacement, velocity, dt: float, voltage=None) -> "Inputs":
-        """Device-test inputs from an imposed displacement [m] and velocity [m/s]."""
-        x = np.asarray(displacement, float)
-        rows = np.zeros((x.size, 3))
-        rows[:, 0] = x
-        rows[:, 1] = velocity
-        if voltage is not None:
-            rows[:, 2] = voltage
-        return cls("device", float(dt), rows, None)
-
-    def slice(self, start: int, stop: int) -> "Inputs":
-        return Inputs(self.kind, self.dt, self.rows[start:stop].copy(), self.mass, self.interp)
-
-    def with_interp(self, interp: str | None) -> "Inputs":
-        """These inputs read another way ("linear", "bandlimited"; None or "auto": chosen by bandwidth)."""
-        if interp in (None, "auto"):
-            interp = input_grid.choose(self.rows, self.kind, self.dt)
-        return self if interp == self.interp else replace(self, interp=interp)
-
-
 @dataclass(frozen=True)
 class Simulation:
     """Result of :func:`simulate`.
@@ -261,6 +111,11 @@ def simulate(
     replay = schedule is not None
     if replay:
         schedules = np.ascontiguousarray(np.asarray(schedule, np.int64).reshape(1, -1))
+        if schedules.shape[1] != max(rows.shape[0] - 1, 1):
+            # the kernel reads it unchecked: a schedule of another grid would be read past its end
+            raise ValueError(f"schedule has {schedules.shape[1]} sub-step counts, this input's grid needs "
+                             f"{rows.shape[0] - 1} (replay a schedule on the inputs it came from, or on "
+                             "Inputs.with_rows of them)")
     else:
         schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
     run_batch_ = kernel(run_batch, lay, work=B * rows.shape[0])  # specialised when it pays (bayes_mr._specialise)

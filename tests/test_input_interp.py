@@ -100,3 +100,23 @@ def test_json_key_and_cli_flag(tmp_path):
         out[interp] = json.loads(js.read_text())
     assert out["auto"]["input_interp"] == "linear"
     assert out["bandlimited"]["input_interp"] == "bandlimited"
+
+
+def test_perturbed_input_keeps_its_grid_and_a_foreign_schedule_is_refused():
+    """Noise widens a band-limited drive's bandwidth, so it would choose a finer grid; ``with_rows`` keeps the
+    grid, so the clean input's sub-step schedule replays on the noisy one (the input-noise replicas of
+    :mod:`bayes_mr.inference.calibrate` do this), and a schedule of another grid is an error, never read past."""
+    n = int(2.0 * FS)
+    clean = Inputs.forced(multisine(np.arange(n) / FS, 1.0, 40.0, 2), 1 / FS).with_interp("bandlimited")
+    noisy_rows = clean.rows.copy()
+    noisy_rows[:, 0] += np.random.default_rng(0).normal(0.0, 0.3 * clean.rows[:, 0].std(), n)
+    assert Inputs.forced(noisy_rows[:, 0], 1 / FS).with_interp("bandlimited").upsample > clean.upsample
+    noisy = clean.with_rows(noisy_rows)
+    assert noisy.upsample == clean.upsample and noisy.slice(0, n // 2).upsample == clean.upsample
+    theta = get_model("bouc-wen").theta("forced", BENCHMARK)
+    sim = simulate("bouc-wen", clean, theta)
+    replayed = simulate("bouc-wen", noisy, theta, schedule=sim.schedule)
+    assert replayed.ok and np.isfinite(replayed["displacement"]).all()
+    with pytest.raises(ValueError, match="schedule has"):
+        simulate("bouc-wen", Inputs.forced(noisy_rows[:, 0], 1 / FS).with_interp("bandlimited"), theta,
+                 schedule=sim.schedule)

@@ -43,7 +43,6 @@ sandwich at its own point (``inference/estimators.py``). Measured by
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
@@ -81,14 +80,16 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
     """Responses of the model at φ to ``n`` fresh draws of the input noise, shape (n, N, C) [channel units].
 
     ŷ(φ; u + w_k) − ŷ(φ; u) on the record's sample grid, the simulation's
-    sub-steps replayed so the difference is the input's effect alone. Zeros
-    when the record's input has no noise.
+    grid and sub-steps replayed (:meth:`~bayes_mr.inputs.Inputs.with_rows`:
+    noise widens a band-limited drive's bandwidth, which would otherwise pick
+    a finer grid) so the difference is the input's effect alone. Zeros when
+    the record's input has no noise.
     """
     sds = input_noise_sd(lik)
     base, sim = lik.predict(np.atleast_2d(phi))
     if sim.schedule is not None:
         # Ω's precision is not worth minutes: at most REPLICA_SUBSTEPS RK4 sub-steps of replicas in all
-        # (a stiff point, e.g. a short UKF training's, needs hundreds per sample), never fewer than MIN_DRAWS
+        # (a stiff point on a long record needs hundreds per sample), never fewer than MIN_DRAWS
         n = min(n, max(MIN_DRAWS, int(REPLICA_SUBSTEPS // max(int(np.sum(sim.schedule)), 1))))
     out = np.zeros((n,) + base.shape[1:])
     if not sds:
@@ -98,7 +99,7 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
         rows = lik.inputs.rows.copy()
         for col, sd in sds.items():
             rows[:, col] += rng.normal(0.0, sd, rows.shape[0])
-        s = simulate(lik.model, replace(lik.inputs, rows=rows), theta, schedule=sim.schedule)
+        s = simulate(lik.model, lik.inputs.with_rows(rows), theta, schedule=sim.schedule)
         if not s.ok[0]:
             continue  # a replica that diverges says nothing about small perturbations
         out[k] = np.stack([s[c][0] for c in lik.channels], axis=-1) - base[0]
