@@ -177,9 +177,7 @@ class UKF:
         phi, cov = ref["phi"], ref["cov"]
         # the filter's covariance was up to ~2x narrower than the spread of output-error estimates under
         # input noise (studies/coverage.py): never report less than least squares' calibrated sandwich here
-        # HAC/GLS sandwich only: the input-noise replicas at a short training's stiff point ran for
-        # many minutes (run --quick's shake table); see inference.calibrate
-        lap = laplace(likelihood, phi, replicas=0)
+        lap = laplace(likelihood, phi)
         cov = calibrate.loewner_max(cov, lap.cov_phi)
         uncertainty = calibrate.describe(lap, likelihood.channels)
         uncertainty["covariance"] = f"max(filter, {uncertainty['covariance']} at the point)"
