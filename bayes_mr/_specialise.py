@@ -12,6 +12,11 @@ becomes a compile-time constant there, and LLVM folds away the branches of
 the effects the model does not have. The physics stays in one place: a new
 effect added to the generic kernel is specialised with no change here.
 
+Compiling one takes one to three minutes, so ``auto`` never waits for it:
+it starts the compile in a child process (:mod:`bayes_mr._compile_worker`)
+and runs the generic kernel until the child marks the machine code ready
+on disk (:class:`_Auto`).
+
 Cache. The generated modules live in ``$BAYES_MR_CACHE/kernels`` (default
 ``~/.cache/bayes_mr/kernels``); numba caches their machine code next to
 them (``__pycache__``), so a fresh machine compiles each model once and a
@@ -30,24 +35,30 @@ import hashlib
 import importlib.util
 import inspect
 import os
+import pickle
+import subprocess
 import sys
 import tempfile
 import threading
 import types
+from contextlib import contextmanager
 from pathlib import Path
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, typeof
+from numba.core.typing.typeof import Purpose
 
 #: Environment variable naming the cache directory (generated kernels in its ``kernels`` subdirectory).
 CACHE_ENV = "BAYES_MR_CACHE"
 #: Environment variable choosing the kernels: ``auto`` (default), ``specialised`` or ``generic``.
 KERNELS_ENV = "BAYES_MR_KERNELS"
-#: ``auto``: a layout's kernel is specialised once this many sample-steps (samples × parameter sets)
-#: have been asked of it in the process, or at once when its compiled module is already on disk. A
-#: cold compile costs ~60 s of CPU per model and kernel and saves ~270 ns per dahl sample-step
-#: (356 → 88 ns): it pays after ~2e8 steps — an emcee posterior or a 100-prior UKF training, not a
-#: least-squares fit or one of diagnose's dozens of candidate refits.
+#: ``auto``: a background compile of a layout's specialised kernel starts once this many sample-steps
+#: (samples × parameter sets) have been asked of it in the process; a kernel already compiled on disk
+#: for the call's argument types runs at once. A cold compile costs one to three minutes of one core
+#: per model and kernel (lugre device: 170 s) and saves ~270 ns per dahl sample-step (356 → 88 ns): it
+#: pays after ~2e8 steps — an emcee posterior or a 100-prior UKF training, not a least-squares fit or
+#: one of diagnose's dozens of candidate refits (on 2 cores the compile takes a core from them).
 AUTO_WORK = 2e8
 
 #: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics).
@@ -56,9 +67,10 @@ AUTO_WORK = 2e8
 INLINE = ("deriv", "rate", "substeps", "advance", "observe")
 
 _loaded: dict[tuple, object] = {}
-_lock = threading.Lock()
+_lock = threading.RLock()
 _work: dict[tuple, float] = {}
-_on_disk: dict[tuple, bool] = {}
+_paths: dict[tuple, Path] = {}
+_started: set[Path] = set()
 
 
 def cache_dir() -> Path:
@@ -187,6 +199,36 @@ def module_path(dispatcher, lay, inline: tuple[str, ...] = INLINE) -> Path:
     return cache_dir() / f"k_{dispatcher.py_func.__name__}_{key}.py"
 
 
+def _load(path: Path):
+    """The generated module at ``path`` (imported once per process)."""
+    name = f"bayes_mr_kernels_{path.stem}"
+    mod = sys.modules.get(name)
+    if mod is None:
+        spec = importlib.util.spec_from_file_location(name, path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        sys.modules[name] = mod
+    return mod
+
+
+def _path(dispatcher, lay_t: tuple[int, ...], inline: tuple[str, ...] = INLINE) -> Path:
+    """:func:`module_path`, memoised (hashing the kernel's sources reads files)."""
+    key = (id(dispatcher), lay_t, inline)
+    with _lock:
+        path = _paths.get(key)
+        if path is None:
+            path = _paths[key] = module_path(dispatcher, lay_t, inline)
+    return path
+
+
+def _generated(dispatcher, lay_t: tuple[int, ...], inline: tuple[str, ...] = INLINE) -> Path:
+    """Path of the generated module, written if missing."""
+    path = _path(dispatcher, lay_t, inline)
+    if not path.exists():
+        _write_atomic(path, _source(dispatcher, lay_t, inline))
+    return path
+
+
 def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
     """``dispatcher`` (a compiled kernel whose first argument is the layout) with ``lay`` fixed.
 
@@ -209,23 +251,92 @@ def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
     lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
     inline = tuple(inline)
     key = (id(dispatcher), lay_t, inline)
+    fn = _loaded.get(key)
+    if fn is None:
+        path = _generated(dispatcher, lay_t, inline)
+        with _lock:
+            fn = _loaded[key] = getattr(_load(path), dispatcher.py_func.__name__)
+    return fn
+
+
+def ready_path(path: Path, argtypes: tuple) -> Path:
+    """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``."""
+    h = hashlib.sha256(repr(argtypes).encode()).hexdigest()[:12]
+    return path.with_name(f"{path.stem}.{h}.ready")
+
+
+def _start_background(dispatcher, lay_t: tuple[int, ...], argtypes: tuple) -> None:
+    """Compile the specialised kernel for ``argtypes`` in another process (once per process and types).
+
+    The child (:mod:`bayes_mr._compile_worker`) writes numba's cache and then
+    the :func:`ready_path` marker; its stderr goes to ``<module>.log``. It is
+    in the caller's process group, so an interrupt stops it with the caller;
+    a caller that ends normally leaves it to finish for the next process.
+    """
+    path = _generated(dispatcher, lay_t)
+    marker = ready_path(path, argtypes)
     with _lock:
-        fn = _loaded.get(key)
-        if fn is not None:
-            return fn
-        path = module_path(dispatcher, lay_t, inline)
-        if not path.exists():
-            _write_atomic(path, _source(dispatcher, lay_t, inline))
-        name = f"bayes_mr_kernels_{path.stem}"
-        mod = sys.modules.get(name)
-        if mod is None:
-            spec = importlib.util.spec_from_file_location(name, path)
-            mod = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(mod)
-            sys.modules[name] = mod
-        fn = getattr(mod, dispatcher.py_func.__name__)
-        _loaded[key] = fn
-        return fn
+        if marker in _started:
+            return
+        _started.add(marker)
+    types_file = marker.with_suffix(".types")
+    _write_atomic(types_file, pickle.dumps(argtypes).hex())
+    # the child must write where this process reads: numba's cache directory as configured here
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(numba.config.CACHE_DIR).parent))
+    with open(path.with_suffix(".log"), "a") as log:
+        subprocess.Popen([sys.executable, "-m", "bayes_mr._compile_worker", str(path), dispatcher.py_func.__name__,
+                          str(types_file), str(marker)], stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env)
+
+
+class _Auto:
+    """A kernel that runs the generic code until its specialised twin is compiled, in the background.
+
+    Called like the generic kernel. On each call it types the arguments; if
+    the specialised kernel for those types is ready on disk it runs that
+    (loading it costs milliseconds), else the generic kernel — and, once the
+    work asked of this layout has passed :data:`AUTO_WORK`, it starts a
+    background compile, so a long job speeds up part-way instead of stopping
+    for the one to three minutes a compile takes. ``eager`` (the
+    ``specialised`` choice) compiles in this process instead, and marks the
+    result ready for later ``auto`` calls.
+    """
+
+    __slots__ = ("dispatcher", "lay", "pays", "eager")
+
+    def __init__(self, dispatcher, lay_t: tuple[int, ...], pays: bool, eager: bool = False):
+        self.dispatcher, self.lay, self.pays, self.eager = dispatcher, lay_t, pays, eager
+
+    def __call__(self, *args):
+        argtypes = tuple(typeof(a, Purpose.argument) for a in args)
+        marker = ready_path(_path(self.dispatcher, self.lay), argtypes)
+        if marker.exists() or self.eager:
+            out = specialised(self.dispatcher, self.lay)(*args)
+            if not marker.exists():
+                _write_atomic(marker, f"{self.dispatcher.py_func.__name__} {argtypes!r}\n")
+            return out
+        if self.pays:
+            _start_background(self.dispatcher, self.lay, argtypes)
+        return self.dispatcher(*args)
+
+
+@contextmanager
+def compiled_here():
+    """Under ``auto``, compile the block's kernels in this process and mark them ready (``specialised``).
+
+    For warm-up calls outside a timing (the bench): later ``auto`` calls with
+    the same argument types then run the specialised kernels from the start.
+    ``generic`` and ``specialised`` are left as they are.
+    """
+    before = os.environ.get(KERNELS_ENV)
+    if (before or "auto").strip().lower() == "auto":
+        os.environ[KERNELS_ENV] = "specialised"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(KERNELS_ENV, None)
+        else:
+            os.environ[KERNELS_ENV] = before
 
 
 def kernel(dispatcher, lay, work: float = 0.0):
@@ -233,8 +344,11 @@ def kernel(dispatcher, lay, work: float = 0.0):
 
     Both give the same numbers (the specialised kernel is the generic code
     with the layout constant). ``generic`` needs no compilation per model
-    (the test suite uses it); ``specialised`` always compiles one;
-    ``auto`` (default) specialises when it pays (:data:`AUTO_WORK`).
+    (the test suite uses it); ``specialised`` always compiles one, in the
+    calling process (and marks it ready for ``auto``); ``auto`` (default) runs the specialised kernel where one
+    is compiled on disk for the call's argument types, and otherwise the
+    generic one while it compiles one in the background once the work pays
+    (:data:`AUTO_WORK`, :class:`_Auto`).
 
     Parameters
     ----------
@@ -249,14 +363,13 @@ def kernel(dispatcher, lay, work: float = 0.0):
     choice = os.environ.get(KERNELS_ENV, "auto").strip().lower()
     if choice == "generic":
         return dispatcher
-    if choice == "specialised":
-        return specialised(dispatcher, lay)
-    if choice != "auto":
+    if choice not in ("auto", "specialised"):
         raise ValueError(f"{KERNELS_ENV}={choice!r}: give 'auto', 'specialised' or 'generic'")
-    key = (id(dispatcher), tuple(int(v) for v in np.asarray(lay).ravel()))
+    lay_t = tuple(int(v) for v in np.asarray(lay).ravel())
+    if choice == "specialised":
+        return _Auto(dispatcher, lay_t, True, eager=True)
+    key = (id(dispatcher), lay_t)
     with _lock:
         _work[key] = _work.get(key, 0.0) + float(work)
-        if key not in _on_disk:
-            _on_disk[key] = module_path(dispatcher, lay).exists()
-        use = _on_disk[key] or _work[key] >= AUTO_WORK
-    return specialised(dispatcher, lay) if use else dispatcher
+        pays = _work[key] >= AUTO_WORK
+    return _Auto(dispatcher, lay_t, pays)

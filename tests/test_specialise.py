@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -93,14 +94,45 @@ def test_kernel_switch(monkeypatch, cache):
         S.kernel(run_batch, lay)
 
 
-def test_auto_specialises_only_when_it_pays(monkeypatch, cache):
-    """``auto`` runs the generic kernel for small jobs and switches once the work pays for a compile."""
-    lay = get_model("lugre+force_offset").layout("device")
+def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
+    """``auto`` runs the generic kernel and asks for one background compile once the work pays for it."""
+    from bayes_mr.models.kernel import mass
+
     monkeypatch.setenv(S.KERNELS_ENV, "auto")
-    assert S.kernel(run_batch, lay, work=1e6) is run_batch
-    assert S.kernel(run_batch, lay, work=S.AUTO_WORK / 2) is run_batch
-    monkeypatch.setattr(S, "specialised", lambda d, l: "specialised")
-    assert S.kernel(run_batch, lay, work=S.AUTO_WORK / 2) == "specialised"
+    started = []
+    monkeypatch.setattr(S, "_start_background", lambda d, l, t: started.append(t))
+    args = _mass_args("lugre+force_offset", "device")
+    for work in (1e6, S.AUTO_WORK / 2):
+        assert S.kernel(mass, args[0], work=work)(*args) == mass(*args)
+    assert started == []
+    k = S.kernel(mass, args[0], work=S.AUTO_WORK / 2)
+    assert k(*args) == mass(*args) and k.dispatcher is mass  # the generic kernel ran this call
+    assert len(started) == 1 and len(started[0]) == 3  # the argument types the child compiles for
+
+
+def _mass_args(name: str, kind: str) -> tuple:
+    """Arguments of the (small, quick to compile) kernel :func:`~bayes_mr.models.kernel.mass`."""
+    model = get_model(name)
+    return model.layout(kind), model.constants(3.0), np.ones(len(model.param_names(kind)))
+
+
+def test_background_compile_is_used_once_ready(monkeypatch, cache):
+    """A real child process compiles a (small) kernel into the cache; the next call loads it without compiling."""
+    from bayes_mr.models.kernel import mass
+
+    monkeypatch.setenv(S.KERNELS_ENV, "auto")
+    args = _mass_args("dahl", "structure")
+    lay = args[0]
+    assert S.kernel(mass, lay, work=2 * S.AUTO_WORK)(*args) == mass(*args)
+    (marker,) = [m for m in S._started if str(cache) in str(m)]
+    for _ in range(300):
+        if marker.exists():
+            break
+        time.sleep(0.5)
+    assert marker.exists(), marker.with_name(marker.name.split(".")[0] + ".log").read_text()
+    assert S.kernel(mass, lay)(*args) == mass(*args)
+    fn = S.specialised(mass, lay)
+    assert sum(fn.stats.cache_hits.values()) == 1 and not fn.stats.cache_misses
 
 
 def test_module_name_follows_the_physics(cache, tmp_path):
@@ -172,3 +204,16 @@ def test_second_process_loads_from_disk(cache):
     t_warm, hits_warm = warm.stdout.split()
     assert int(hits_cold) == 0 and int(hits_warm) == 1
     assert float(t_warm) < float(t_cold)
+
+
+def test_specialised_choice_compiles_here_and_marks_it_ready_for_auto(monkeypatch, cache):
+    """``specialised`` compiles in the calling process (the bench's warm-up); ``auto`` then runs that kernel."""
+    from bayes_mr.models.kernel import mass
+
+    args = _mass_args("lugre", "forced")
+    monkeypatch.setenv(S.KERNELS_ENV, "specialised")
+    assert S.kernel(mass, args[0])(*args) == mass(*args)
+    monkeypatch.setenv(S.KERNELS_ENV, "auto")
+    monkeypatch.setattr(S, "_start_background", lambda *a: pytest.fail("no compile needed: it is ready"))
+    monkeypatch.setattr(S, "specialised", lambda d, l: (lambda *a: "specialised ran"))
+    assert S.kernel(mass, args[0], work=2 * S.AUTO_WORK)(*args) == "specialised ran"
