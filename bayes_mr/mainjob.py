@@ -33,6 +33,7 @@ touches the README).
 
 from __future__ import annotations
 
+import json
 import time as _time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -44,6 +45,7 @@ from . import results
 from .comparison import compare, selection_route, table
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
+from .data.noise_floor import noise_floor, with_noise_floor
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
 from .identify import UKF, Emcee, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
@@ -144,7 +146,13 @@ def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Datase
     rec = load_packaged() if record is None else record
     trimmed, trim = trim_excited(rec)
     factor = max(1, int(round(float(trimmed.attrs["fs"]) / budget.fs)))
-    rec = decimate_record(trimmed, factor) if factor > 1 else trimmed
+    decimated = decimate_record(trimmed, factor) if factor > 1 else trimmed
+    if not any(k.startswith("noise_sd_") for k in rec.attrs):
+        # the noise floor of the whole record at the fitted rate, before trimming removes its quiet
+        # start and end: a differencing estimate on the trimmed record sees the signal's curvature
+        # (the packaged damper at 250 Hz: force 130 N, against 1.0 N in its quiet tail)
+        decimated = with_noise_floor(decimated, noise_floor(decimate_record(rec, factor) if factor > 1 else rec))
+    rec = decimated
     if budget.input_interp is not None:
         rec.attrs["input_interp"] = budget.input_interp  # every fit and prediction reads the record's attribute
     if budget.duration_s is not None:
@@ -164,6 +172,8 @@ def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Datase
         "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n), "input_interp": budget.input_interp,
         "duration_s": float(n / rec.attrs["fs"]),
         "part_a_s": float(cut / rec.attrs["fs"]), "part_b_s": float((n - cut) / rec.attrs["fs"]),
+        "noise_sd": {k[len("noise_sd_"):]: float(v) for k, v in rec.attrs.items() if k.startswith("noise_sd_")},
+        "noise_floor": json.loads(rec.attrs.get("noise_floor", "{}")),
     }
     return rec, part_a, part_b, info
 

@@ -123,9 +123,4 @@ def _with_noise_floor(ds: xr.Dataset, noise_record: xr.Dataset | str | os.PathLi
     if noise_record is not None and not isinstance(noise_record, xr.Dataset):
         # a no-input run has no storey mass of its own: the record's (or 1 kg) passes the reader's check
         noise_record = read_file(noise_record, mass=ds.attrs.get("mass", 1.0))
-    floor = _noise.noise_floor(ds, noise_record=noise_record)
-    out = ds.copy()
-    for name, sd in floor.items():
-        out.attrs[f"noise_sd_{name}"] = float(sd)
-    out.attrs["noise_floor"] = json.dumps({"methods": floor.methods, "segment": floor.segment})
-    return out
+    return _noise.with_noise_floor(ds, _noise.noise_floor(ds, noise_record=noise_record))

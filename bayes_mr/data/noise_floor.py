@@ -11,6 +11,8 @@ for simulations is *generated* by :mod:`bayes_mr.synthetic_noise`.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import xarray as xr
 from scipy import ndimage
@@ -224,4 +226,13 @@ def noise_floor(
         if name not in out:
             out[name] = differencing_sd(ds[name].values[valid])
             out.methods[name] = "differencing"
+    return out
+
+
+def with_noise_floor(ds: xr.Dataset, floor: NoiseFloor) -> xr.Dataset:
+    """A copy of ``ds`` carrying ``floor``: ``noise_sd_<channel>`` and ``noise_floor`` (how each SD was found)."""
+    out = ds.copy()
+    for name, sd in floor.items():
+        out.attrs[f"noise_sd_{name}"] = float(sd)
+    out.attrs["noise_floor"] = json.dumps({"methods": floor.methods, "segment": floor.segment})
     return out

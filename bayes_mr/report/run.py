@@ -163,6 +163,17 @@ def _noise_lines(summary: dict) -> list[str]:
             f"`--noise {summary.get('noise', 'iid')}`."]
 
 
+def _floor_sentence(rec: dict) -> str:
+    """Where the measurement-noise floor the UKF, the input-noise replicas and the diagnosis use came from."""
+    sd, how = rec.get("noise_sd") or {}, (rec.get("noise_floor") or {})
+    if not sd:
+        return ""
+    methods = sorted(set((how.get("methods") or {}).values()))
+    seg = how.get("segment")
+    where = f" ({', '.join(methods)}" + (f", {seg[0]:.1f}–{seg[1]:.1f} s of the untrimmed record)" if seg else ")")
+    return (" Noise floor" + where + ": " + ", ".join(f"{c} {fmt(v, 3)}" for c, v in sd.items()) + " (SI).")
+
+
 def headline(summary: dict) -> list[str]:
     """The sentences a structural engineer reads first (every number from this run)."""
     rows, sel = summary["rows"], summary["selected"]
@@ -171,7 +182,8 @@ def headline(summary: dict) -> list[str]:
     lines.append(f"Record: {rec['source']} — {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz after trimming and "
                  f"decimation by {rec['decimation']} (inputs {rec.get('input_interp') or 'auto'} between samples); "
                  f"{rec['masked']} samples masked by quality control. "
-                 f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s.")
+                 f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s."
+                 + _floor_sentence(rec))
     if sel:
         bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
         runner = min(bf, key=bf.get) if bf else None
