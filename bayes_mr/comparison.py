@@ -35,6 +35,7 @@ from . import results
 from .executor import Outcome, run_jobs, share
 from .identify import Identify
 from .inference.estimators import engine
+from .inference.evidence_scale import LaplaceTerms, common_scale
 from .identify import validate as validate_fit
 from .models import get_model
 from .progress import say as progress_say
@@ -45,6 +46,10 @@ from .simulate import Inputs
 #: not among them: it is the best of 100 runs chosen after seeing the data, with a parameter random walk,
 #: not a marginal likelihood; UKF-only comparisons fall back to the thesis's lowest MSE (3.6.3).
 ROUTES = (("mcmc", "ti"), ("lsq", "laplace"))
+#: What ``selected`` is chosen on when an evidence route exists: ``raw`` (the route's ln Z of the working
+#: likelihood) or ``calibrated`` (the magnitude-adjusted Laplace evidence at the common scale,
+#: :mod:`bayes_mr.inference.evidence_scale`). Both sets of Bayes factors are always reported.
+SELECT_ON = "raw"
 
 
 def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
@@ -161,6 +166,10 @@ def compare(
         ``rows`` (one per model × engine: the ``fit`` keys, ``error`` if it
         failed, ``validation`` with ``validate``), ``selected``,
         ``bayes_factors`` (model → ln Z(selected) − ln Z(model)),
+        ``selected_on`` (``raw``, ``calibrated`` or ``mse``: :data:`SELECT_ON`), and
+        the calibrated evidence beside it (:func:`calibrated_evidence`:
+        ``evidence_scale``, ``log_evidence_calibrated``, ``bayes_factors_calibrated``,
+        ``selected_calibrated``),
         ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
         ``idata`` (not JSON: (model, engine) → InferenceData).
     """
@@ -179,16 +188,51 @@ def compare(
 
     eng, route = selection_route(rows, models)
     selected, factors, verdict = _select(rows, eng, route, force)
+    calibrated = calibrated_evidence(rows, eng, models)
+    verdict["selected_on"] = "mse" if verdict.get("selected_by") == "mse" else "raw"
+    if SELECT_ON == "calibrated" and calibrated and verdict.get("selected_by"):
+        selected = calibrated["selected_calibrated"]
+        verdict.update(selected_by="calibrated laplace evidence", selected_on="calibrated")
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
     out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
-           "evidence_engine": eng, **verdict, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
+           "evidence_engine": eng, **verdict, **calibrated, "crosscheck": cross,
+           "record": str(record.attrs.get("source", "")),
            "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
            "input_interp": Inputs.from_record(record).interp}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     out["idata"] = fits
     return out
+
+
+def calibrated_evidence(rows: list[dict], eng: str | None, models: Sequence[str]) -> dict:
+    """The magnitude-adjusted Laplace evidence of every model at the comparison's common scale k̄.
+
+    From the ``evidence_calibration`` terms of the selecting engine's rows (an
+    ``mcmc`` row carries those of the least-squares fit it started from):
+    k̄ = Σ p_m / Σ tr(H_m C_m) (:func:`bayes_mr.inference.evidence_scale.common_scale`),
+    ln Z_k̄ of each model and ln BF = ln Z_k̄(best) − ln Z_k̄(model). Empty when
+    some model lacks the terms (a UKF-only comparison, a failed fit).
+
+    Returns
+    -------
+    dict
+        ``evidence_scale`` (k̄), ``log_evidence_calibrated`` and
+        ``bayes_factors_calibrated`` (model → nats), ``evidence_route_calibrated``
+        (``laplace``) and ``selected_calibrated`` (the model with the largest ln Z_k̄).
+    """
+    terms = {r["model"]: LaplaceTerms.from_dict(r["evidence_calibration"]) for r in rows
+             if r.get("engine") == eng and r.get("evidence_calibration")}
+    if eng is None or not all(m in terms for m in models):
+        return {}
+    k = common_scale(list(terms.values()))
+    if not math.isfinite(k):
+        return {}
+    ln_z = {m: t.log_evidence(k) for m, t in terms.items()}
+    best = max(ln_z, key=ln_z.get)
+    return {"evidence_scale": k, "log_evidence_calibrated": ln_z, "evidence_route_calibrated": "laplace",
+            "bayes_factors_calibrated": {m: ln_z[best] - z for m, z in ln_z.items()}, "selected_calibrated": best}
 
 
 def _select(rows: list[dict], eng: str | None, route: str | None, force: bool) -> tuple[str | None, dict, dict]:
@@ -256,13 +300,17 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
 
 def table(out: dict) -> pd.DataFrame:
-    """One line per row of a comparison: model, engine, ln Z, ln BF, MSE, force NRMSE, E_t, wall time."""
+    """One line per row of a comparison: model, engine, ln Z, ln BF (raw and calibrated), MSE, force NRMSE, E_t, wall."""
     lines = []
     for r in out["rows"]:
         fe = r.get("force_errors") or {}
         line = {"model": r["model"], "engine": r["engine"], "ln Z": r.get("log_evidence"),
                 "ln BF vs selected": out["bayes_factors"].get(r["model"]) if r["engine"] == out["evidence_engine"]
                 else None,
+                "ln Z calibrated": (out.get("log_evidence_calibrated") or {}).get(r["model"])
+                if r["engine"] == out["evidence_engine"] else None,
+                "ln BF calibrated": (out.get("bayes_factors_calibrated") or {}).get(r["model"])
+                if r["engine"] == out["evidence_engine"] else None,
                 "MSE": r.get("mse"), "force NRMSE": r.get("force_nrmse"), "E_t": fe.get("E_t"),
                 "wall [s]": r.get("wall_s"), "error": r.get("error", "")}
         v = r.get("validation")
