@@ -165,11 +165,8 @@ def compare(
     dict
         ``rows`` (one per model × engine: the ``fit`` keys, ``error`` if it
         failed, ``validation`` with ``validate``), ``selected``,
-        ``bayes_factors`` (model → ln Z(selected) − ln Z(model)),
-        ``selected_on`` (``raw``, ``calibrated`` or ``mse``: :data:`SELECT_ON`), and
-        the calibrated evidence beside it (:func:`calibrated_evidence`:
-        ``evidence_scale``, ``log_evidence_calibrated``, ``bayes_factors_calibrated``,
-        ``selected_calibrated``),
+        ``bayes_factors`` (model → ln Z(selected) − ln Z(model)), ``selected_on``
+        (:data:`SELECT_ON`), :func:`calibrated_evidence`'s keys,
         ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
         ``idata`` (not JSON: (model, engine) → InferenceData).
     """
@@ -188,16 +185,11 @@ def compare(
 
     eng, route = selection_route(rows, models)
     selected, factors, verdict = _select(rows, eng, route, force)
-    calibrated = calibrated_evidence(rows, eng, models)
-    verdict["selected_on"] = "mse" if verdict.get("selected_by") == "mse" else "raw"
-    if SELECT_ON == "calibrated" and calibrated and verdict.get("selected_by"):
-        selected = calibrated["selected_calibrated"]
-        verdict.update(selected_by="calibrated laplace evidence", selected_on="calibrated")
+    selected, verdict = _select_on(selected, verdict, calibrated_evidence(rows, eng, models))
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
     out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
-           "evidence_engine": eng, **verdict, **calibrated, "crosscheck": cross,
-           "record": str(record.attrs.get("source", "")),
+           "evidence_engine": eng, **verdict, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
            "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
            "input_interp": Inputs.from_record(record).interp}
     if out_dir is not None:
@@ -233,6 +225,15 @@ def calibrated_evidence(rows: list[dict], eng: str | None, models: Sequence[str]
     best = max(ln_z, key=ln_z.get)
     return {"evidence_scale": k, "log_evidence_calibrated": ln_z, "evidence_route_calibrated": "laplace",
             "bayes_factors_calibrated": {m: ln_z[best] - z for m, z in ln_z.items()}, "selected_calibrated": best}
+
+
+def _select_on(selected: str | None, verdict: dict, calibrated: dict) -> tuple[str | None, dict]:
+    """(selected, verdict with ``selected_on`` and the calibrated keys): :data:`SELECT_ON` applied."""
+    verdict = {**verdict, "selected_on": "mse" if verdict.get("selected_by") == "mse" else "raw", **calibrated}
+    if SELECT_ON == "calibrated" and calibrated and verdict.get("selected_by"):
+        selected = calibrated["selected_calibrated"]
+        verdict.update(selected_by="calibrated laplace evidence", selected_on="calibrated")
+    return selected, verdict
 
 
 def _select(rows: list[dict], eng: str | None, route: str | None, force: bool) -> tuple[str | None, dict, dict]:
@@ -300,11 +301,16 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
 
 def table(out: dict) -> pd.DataFrame:
-    """One line per row of a comparison: model, engine, ln Z, ln BF (raw and calibrated), MSE, force NRMSE, E_t, wall."""
+    """One line per row of a comparison: model, engine, residual model and n_eff, ln Z (route, error), ln BF (raw and
+    calibrated), MSE, force NRMSE, E_t, wall time."""
     lines = []
     for r in out["rows"]:
         fe = r.get("force_errors") or {}
-        line = {"model": r["model"], "engine": r["engine"], "ln Z": r.get("log_evidence"),
+        route = (r.get("evidence_routes") or {}).get(r.get("evidence_route") or "", {})
+        n_eff = r.get("n_eff") if isinstance(r.get("n_eff"), dict) else {}
+        line = {"model": r["model"], "engine": r["engine"], "noise": r.get("noise_model"),
+                "n_eff": ", ".join(f"{c} {v:.4g}" for c, v in n_eff.items() if v is not None),
+                "ln Z": r.get("log_evidence"), "route": r.get("evidence_route"), "ln Z error": route.get("total_error"),
                 "ln BF vs selected": out["bayes_factors"].get(r["model"]) if r["engine"] == out["evidence_engine"]
                 else None,
                 "ln Z calibrated": (out.get("log_evidence_calibrated") or {}).get(r["model"])
