@@ -57,7 +57,9 @@ CANDIDATES = ("dahl", "normalized-bouc-wen")
 SIGNALS = ("elcentro", "freq-sweep-up-down")
 RESIDUALS = ("iid", "ar")
 #: Truths per candidate form in the true-candidate family (signals alternate).
-PER_FORM = 2
+PER_FORM = 6
+#: Truth draws (and noise seeds) per hidden effect × signal.
+HIDDEN_SEEDS = 2
 
 
 def signal(name: str, fs: float, duration: float):
@@ -176,7 +178,7 @@ def main(out_dir: str | Path = "results/studies/bayes-factor-rate", quick: bool 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     duration = 2.0 if quick else DURATION
-    seeds = [seed]
+    seeds = [seed] if quick else [seed + i for i in range(HIDDEN_SEEDS)]
     rates = TRUE_RATES if quick else RATES
     # the quick run: the first hidden effect and the first signal only
     hidden = hidden_rows(seeds, rates, duration, *((dict(list(HIDDEN.items())[:1]), SIGNALS[:1]) if quick else ()),
@@ -191,8 +193,9 @@ def main(out_dir: str | Path = "results/studies/bayes-factor-rate", quick: bool 
     lines = ["# Bayes factors against the sampling rate", "",
              f"Least squares (Laplace route) through `compare`; structure tests of {duration:g} s, "
              f"{100 * NOISE:g} % RMS noise per sample on the input and both outputs, recorded at "
-             f"{', '.join(f'{r:g}' for r in rates)} Hz; each hidden-effect record: seed {seed} + 10 × signal index "
-             f"(truth draw and noise). Wall time {wall / 60:.1f} min.", "",
+             f"{', '.join(f'{r:g}' for r in rates)} Hz; hidden-effect records: seeds {seeds} + 10 × signal index "
+             f"(truth draw and noise); true-candidate records: seeds {seed}…{seed + PER_FORM - 1} per form. "
+             f"Wall time {wall / 60:.1f} min.", "",
              "## No true candidate (a hidden effect): ln Z(dahl) − ln Z(normalized-bouc-wen)", "",
              markdown_table(growth), "",
              f"Per record, |ln BF| at {max(rates):g} Hz over |ln BF| at {min(rates):g} Hz (median): " +

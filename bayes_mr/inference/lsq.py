@@ -37,7 +37,9 @@
    input noise (errors in variables, :mod:`.calibrate`): a Bartlett middle
    with a bandwidth the record can afford misses most of it. The evidence is
    ln Z ≈ ln p(y|φ̂,σ̂) + ln p(φ̂) + ln p(σ̂) + ½(d+c) ln 2π + ½ ln|Σ_φ| − ½ Σ_c ln(2 N_c),
-   with the same priors as :class:`~bayes_mr.likelihood.OutputError`.
+   with the same priors as :class:`~bayes_mr.likelihood.OutputError`. Its terms
+   (:class:`~bayes_mr.inference.evidence_scale.LaplaceTerms`) also give the calibrated
+   evidence of the likelihood raised to k = p / tr(JᵀJ Cov(φ)) (:mod:`.evidence_scale`).
 4. **Under the AR residual model** (``OutputError(..., residual="ar")``,
    :mod:`bayes_mr.noise_model`) steps 1–2 are the first, iid fit; its
    residual chooses each channel's AR order (BIC), and the re-weighted

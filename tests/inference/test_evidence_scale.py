@@ -71,6 +71,7 @@ def test_correct_likelihood_gives_k_near_one_and_the_raw_bayes_factor(seed):
     assert k > 0.8
     raw = fits["dahl"].log_evidence - fits["dahl+force_offset"].log_evidence
     cal = terms["dahl"].log_evidence(k) - terms["dahl+force_offset"].log_evidence(k)
+    print(f"k {k:.3f} (own {[round(t.scale, 3) for t in terms.values()]}), ln BF raw {raw:.4g}, calibrated {cal:.4g}")
     assert terms["dahl"].log_evidence(1.0) == pytest.approx(fits["dahl"].log_evidence, abs=1e-9)
     assert abs(cal - raw) < 0.25 * abs(raw) + 1.0, (raw, cal, k)
 
@@ -95,8 +96,11 @@ def _hidden_effect_pair(fs: float) -> tuple[float, float]:
 
 def test_calibrated_bayes_factor_does_not_grow_with_the_rate():
     """250 Hz → 1 kHz, same 2 s: the raw |ln BF| between two wrong forms grows ≈ ×4 (N/2 · ln SSR ratio);
-    the calibrated one stays within a factor 2 (studies/bayes_factor_rate.py: ×0.6–1.4 on every record)."""
+    the calibrated one moves by a small fraction of that (studies/bayes_factor_rate.py under iid: the raw
+    ln BF moves by 50–3000 nats from 250 Hz to 1–4 kHz, the calibrated one by < 3.1 nats, ratios 0.96–1.05
+    where it is not near 0)."""
     raw_lo, cal_lo = _hidden_effect_pair(250.0)
     raw_hi, cal_hi = _hidden_effect_pair(1000.0)
+    print(f"raw {raw_lo:.4g} -> {raw_hi:.4g}, calibrated {cal_lo:.4g} -> {cal_hi:.4g}")
     assert abs(raw_hi) > 2.5 * abs(raw_lo), (raw_lo, raw_hi)
-    assert 0.5 < abs(cal_hi) / abs(cal_lo) < 2.0, (cal_lo, cal_hi)
+    assert abs(cal_hi - cal_lo) < 0.05 * abs(raw_hi - raw_lo) + 1.0, (cal_lo, cal_hi, raw_lo, raw_hi)
