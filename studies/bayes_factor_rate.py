@@ -152,7 +152,7 @@ def growth_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def ratio_table(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per record (truth, signal, seed, residual): |ln BF| at the top rate over that at the lowest, raw and calibrated."""
+    """Per record (truth, signal, seed, residual): |ln BF| at the top rate over that at the lowest (raw, calibrated)."""
     lo, hi = rows["fs"].min(), rows["fs"].max()
     key = ["truth", "signal", "seed", "residual"]
     a = rows[rows["fs"] == lo].set_index(key)
@@ -186,24 +186,30 @@ def main(out_dir: str | Path = "results/studies/bayes-factor-rate", quick: bool 
     true = true_rows([seed] if quick else [seed + i for i in range(PER_FORM)], TRUE_RATES, duration, executor)
     hidden.to_csv(out / "hidden_rows.csv", index=False)
     true.to_csv(out / "true_rows.csv", index=False)
+    return report(out, hidden, true, time.perf_counter() - t0, seed=seed, seeds=seeds, duration=duration)
+
+
+def report(out: Path, hidden: pd.DataFrame, true: pd.DataFrame, wall: float, *, seed: int, seeds,
+           duration: float) -> dict:
+    """``report.md``, its figure and the summary from the rows (also to rebuild them from the CSVs)."""
+    rates = sorted(hidden["fs"].unique())
     growth, ratios, sel = growth_table(hidden), ratio_table(hidden), selection_table(true)
-    _figure(hidden, out / "figures" / "ln_bf_vs_rate.png")
-    wall = time.perf_counter() - t0
+    _figure(hidden, out / "ln_bf_vs_rate.png")  # beside report.md: scripts/update_readme.py study copies it
     per_res = ratios.groupby("residual")[["raw", "calibrated"]].median()
     lines = ["# Bayes factors against the sampling rate", "",
              f"Least squares (Laplace route) through `compare`; structure tests of {duration:g} s, "
              f"{100 * NOISE:g} % RMS noise per sample on the input and both outputs, recorded at "
              f"{', '.join(f'{r:g}' for r in rates)} Hz; hidden-effect records: seeds {seeds} + 10 × signal index "
-             f"(truth draw and noise); true-candidate records: seeds {seed}…{seed + PER_FORM - 1} per form. "
-             f"Wall time {wall / 60:.1f} min.", "",
-             "## No true candidate (a hidden effect): ln Z(dahl) − ln Z(normalized-bouc-wen)", "",
+             f"(truth draw and noise); true-candidate records: seeds {seed}…{seed + true['seed'].nunique() - 1} "
+             f"per form. Wall time {wall / 60:.1f} min.", "",
+             "### No true candidate (a hidden effect): ln Z(dahl) − ln Z(normalized-bouc-wen)", "",
              markdown_table(growth), "",
              f"Per record, |ln BF| at {max(rates):g} Hz over |ln BF| at {min(rates):g} Hz (median): " +
              "; ".join(f"{res}: raw ×{per_res.loc[res, 'raw']:.3g}, calibrated ×{per_res.loc[res, 'calibrated']:.3g}"
                        for res in per_res.index) + ".", "",
              markdown_table(ratios), "",
-             "![ln BF against the rate](figures/ln_bf_vs_rate.png)", "",
-             "## A true candidate: share of records whose true form is selected", "",
+             "![ln BF against the rate](ln_bf_vs_rate.png)", "",
+             "### A true candidate: share of records whose true form is selected", "",
              markdown_table(sel), ""]
     (out / "report.md").write_text("\n".join(lines) + "\n")
     return {"report": str(out / "report.md"), "wall_s": wall, "rates_hz": list(rates), "duration_s": duration,
@@ -225,6 +231,8 @@ def _figure(rows: pd.DataFrame, path: Path) -> None:
             ax.plot(r["fs"], r["ln_bf_calibrated"].abs(), "--s", color=f"C{i}", ms=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xticks(RATES, [f"{r:g}" for r in RATES], minor=False)
+        ax.minorticks_off()
         ax.set_xlabel("sampling rate [Hz]")
         ax.set_title(f"--noise {res}: raw (solid), calibrated (dashed)")
     np.atleast_1d(axes)[0].set_ylabel("|ln BF(dahl : normalized-bouc-wen)| [nats]")

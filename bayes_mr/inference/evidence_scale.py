@@ -5,8 +5,11 @@ likelihood (iid, or AR by BIC per channel). When the model is wrong the
 residual is smooth in time, and between two wrong forms ln Z₁ − ln Z₂ ≈
 (N/2)·ln(SSR₂/SSR₁) grows with the number of samples N — with the *sampling
 rate* at a fixed record length — instead of with the information the record
-holds (``studies/bayes_factor_rate.py`` measures it: ×4 per ×4 in rate under
-``iid``, and ``ar`` does not stop it).
+holds. ``studies/bayes_factor_rate.py`` measures it (structure tests, 3 s, 2 %
+noise on input and outputs, a hidden effect): under ``iid`` the raw |ln BF| of
+dahl against normalized Bouc–Wen grows ×17 from 250 Hz to 4 kHz, the calibrated
+one below ×1.04 (medians of 8 records); under ``ar`` the raw one does not grow
+but wanders (its sign changes with the rate on 2 of 8 records).
 
 The calibrated covariance C of the estimate (the sandwich of
 :mod:`.calibrate`, which includes the residual's autocorrelation and the
