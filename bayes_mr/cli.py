@@ -212,6 +212,9 @@ def cmd_compare(args) -> int:
               file=sys.stderr)
     elif out.get("refused"):
         print(f"no model selected: {out['refused']}", file=sys.stderr)
+    if out.get("bayes_factors_calibrated"):
+        print(f"calibrated laplace evidence (k = {out['evidence_scale']:.3g}) selects {out['selected_calibrated']}; "
+              f"selected on the {out['selected_on']} evidence", file=sys.stderr)
     _write_json(out, args.json)
     return 0
 

@@ -74,6 +74,9 @@ def test_compare_cli_json_and_table(tmp_path, device_csv, capsys):
     data = json.loads(out.read_text())
     assert {"rows", "selected", "bayes_factors"} <= set(data)
     assert data["selected"] == "dahl+force_offset" and data["evidence_route"] == "laplace"
+    # the calibrated evidence beside the raw one (issue 14): one k for both models, the same choice here
+    assert data["selected_on"] == "calibrated" and 0 < data["evidence_scale"] <= 1
+    assert data["selected_calibrated"] == "dahl+force_offset" and data["bayes_factors_calibrated"]["dahl"] > 0
     assert all(FIT_KEYS <= set(r) and "validation" in r for r in data["rows"])
     assert "| model | engine |" in capsys.readouterr().err
     assert (tmp_path / "fits" / "compare.csv").exists()

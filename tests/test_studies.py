@@ -74,3 +74,13 @@ def test_boucwen_benchmark_quick(tmp_path):
     assert summary["selected"] == "bouc-wen"
     assert summary["max_abs_z"]["lsq"] < 3
     assert summary["held_out_rmse"] < 2e-5
+
+
+@pytest.mark.slow
+def test_bayes_factor_rate_quick(tmp_path):
+    """Issue 14: the calibrated ln BF between two wrong forms barely moves from 250 Hz to 1 kHz; the raw one
+    grows (quick: one hidden-effect record, 2 s; ~1.5 min)."""
+    out, summary = run_study("bayes-factor-rate", tmp_path, "--quick")
+    assert (out / "report.md").exists() and (out / "ln_bf_vs_rate.png").exists()
+    iid = [r for r in summary["ratio_top_over_lowest"] if r["residual"] == "iid"]
+    assert all(r["raw"] > 2.5 and 0.5 < r["calibrated"] < 2.0 for r in iid), iid

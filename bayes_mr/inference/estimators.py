@@ -27,6 +27,7 @@ from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
 from .lsq import LSQResult, LSQSettings, fit_lsq, laplace
 from . import calibrate, ukf
+from .evidence_scale import calibration_info
 from .ukf import TAUS, UKFSettings
 
 
@@ -68,7 +69,8 @@ class LeastSquares:
             coords={"param": list(coords.names)})
         info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
-                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels)}
+                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels),
+                **calibration_info(res.evidence_terms)}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info,
                          groups={"lsq_starts": starts} if starts is not None else {},

@@ -37,7 +37,9 @@
    input noise (errors in variables, :mod:`.calibrate`): a Bartlett middle
    with a bandwidth the record can afford misses most of it. The evidence is
    ln Z ≈ ln p(y|φ̂,σ̂) + ln p(φ̂) + ln p(σ̂) + ½(d+c) ln 2π + ½ ln|Σ_φ| − ½ Σ_c ln(2 N_c),
-   with the same priors as :class:`~bayes_mr.likelihood.OutputError`.
+   with the same priors as :class:`~bayes_mr.likelihood.OutputError`. Its terms
+   (:class:`~bayes_mr.inference.evidence_scale.LaplaceTerms`) also give the calibrated
+   evidence of the likelihood raised to k = p / tr(JᵀJ Cov(φ)) (:mod:`.evidence_scale`).
 4. **Under the AR residual model** (``OutputError(..., residual="ar")``,
    :mod:`bayes_mr.noise_model`) steps 1–2 are the first, iid fit; its
    residual chooses each channel's AR order (BIC), and the re-weighted
@@ -62,7 +64,7 @@ from scipy import optimize
 
 from .. import noise_model
 from ..likelihood import OutputError
-from . import calibrate
+from . import calibrate, evidence_scale
 from .calibrate import hac_covariance
 from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen, stiff
 
@@ -140,6 +142,9 @@ class LSQResult:
     input_noise : dict or None
         :func:`.calibrate.replica_middle`'s info when the input's noise
         entered the covariance (``input_share`` per channel, ``n_replicas``).
+    evidence_terms : LaplaceTerms or None
+        The pieces of ``log_evidence`` (:mod:`.evidence_scale`), for the
+        magnitude-adjusted (calibrated) evidence.
     """
 
     phi: np.ndarray
@@ -155,7 +160,7 @@ class LSQResult:
     hac_lag: int = 0
     whiteness_p: float | None = None
     input_noise: dict | None = None
-
+    evidence_terms: evidence_scale.LaplaceTerms | None = None
 
 
 # --- covariance -------------------------------------------------------------------------
@@ -328,17 +333,8 @@ def _ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[fl
 
 
 def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
-    """ln of the Laplace posterior volume, each direction bounded by the prior box.
-
-    The Laplace evidence multiplies the likelihood's peak by the volume
-    (2π)^{d/2} |JᵀJ|^{-1/2} = Π_i √(2π) σ_i over the eigen-directions v_i of JᵀJ
-    (σ_i = λ_i^{-1/2}). A direction the data cannot see has λ_i → 0 and an
-    unbounded σ_i, yet the prior is uniform on a box: the likelihood cannot be
-    integrated over more than the box's extent along v_i,
-    w_i = Σ_j |v_ij| (hi_j − lo_j). Each direction therefore contributes
-    min(√(2π) σ_i, w_i), so an unidentified parameter gains nothing (its ln w
-    cancels its prior's −ln w) instead of up to ~345 nats from a clipped
-    eigenvalue.
+    """ln of the Laplace posterior volume, each direction bounded by the prior box
+    (:func:`bayes_mr.inference.evidence_scale.log_volume`: an unidentified parameter gains nothing).
 
     Parameters
     ----------
@@ -347,11 +343,7 @@ def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
     widths : ndarray, shape (d,)
         Prior box widths hi − lo in φ.
     """
-    eig, vec = np.linalg.eigh(JtJ)
-    with np.errstate(divide="ignore"):
-        gauss = 0.5 * math.log(2 * math.pi) - 0.5 * np.log(np.clip(eig, 0.0, None))
-    box = np.log(np.abs(vec).T @ np.asarray(widths, float))
-    return float(np.sum(np.minimum(gauss, box)))
+    return evidence_scale.log_volume(*evidence_scale.volume_terms(JtJ, widths))
 
 
 def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0,
@@ -380,7 +372,6 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     J = rf.jacobian(phi, central=True)
     JtJ = J.T @ J
     cov_iid = np.linalg.pinv(JtJ)
-    log_volume = posterior_log_volume(JtJ, lik.phi_hi - lik.phi_lo)
     p_white, occam, n_terms = None, 0.0, np.full(sigma.size, n_c)
     if ar:
         loglik, occam, n_terms, p_white = _ar_terms(lik, yhat[0], sigma)
@@ -391,13 +382,15 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     else:
         cov, lag = hac_covariance(J, r, n_c)
     cov, eiv = _with_input_noise(lik, phi, J, sigma, cov, replicas)
-    log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo)))
-    log_z = loglik + log_prior + log_volume + occam
+    log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo))) + occam
     if sampled:
         # log-uniform σ prior, and the Gaussian integral over ln σ_c (curvature 2 N_c at the optimum)
-        c = sigma.size
-        log_z += -float(np.sum(lik.log_sigma_hi - lik.log_sigma_lo)) + 0.5 * c * math.log(2 * math.pi)
-        log_z -= 0.5 * c * math.log(2.0 * n_c) if not ar else 0.5 * float(np.sum(np.log(2.0 * n_terms)))
+        log_prior += -float(np.sum(lik.log_sigma_hi - lik.log_sigma_lo)) + 0.5 * sigma.size * math.log(2 * math.pi)
+    terms = evidence_scale.LaplaceTerms(
+        loglik, log_prior, *evidence_scale.volume_terms(JtJ, lik.phi_hi - lik.phi_lo),
+        n_coef=int(sum(lik.residual.orders)) if ar else 0,
+        sigma_counts=np.asarray(n_terms, float) if sampled else None, trace_hc=evidence_scale.trace_hc(JtJ, cov))
+    log_z = terms.log_evidence(1.0)
     coords = lik.par.coords
     theta = coords.to_theta(phi)
     sd_phi = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -416,6 +409,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         hac_lag=lag,
         whiteness_p=p_white,
         input_noise=eiv,
+        evidence_terms=terms,
     )
 
 

@@ -8,6 +8,7 @@ import xarray as xr
 from .base import Posterior, even_indices
 from .calibrate import adjust_draws, describe, loewner_max
 from .evidence import Evidence, select_route
+from .evidence_scale import calibration_info
 from .mcmc import MCMCResult
 
 
@@ -74,6 +75,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)
         info["uncertainty"] = {**describe(lsq, lik.channels), "draws": "mapped to least squares' covariance"}
+        info.update(calibration_info(lsq.evidence_terms))  # the Laplace route's calibrated evidence (evidence_scale)
     names = list(lik.names)
     return Posterior(
         engine="mcmc", draws=coords.to_theta(x[:, :, :p]), point=point,
