@@ -191,19 +191,36 @@ def compare(
     rows, fits = _run_grid(pairs, record, validate, seed, estimators, executor=executor, say=say,
                            progress=bool(progress) and executor is None, out_dir=out_dir, noise=noise)
 
-    eng, route = selection_route(rows, models)
-    selected, factors, verdict = _select(rows, eng, route, force)
-    selected, factors, verdict = _select_on(selected, factors, verdict, calibrated_evidence(rows, eng, models))
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
-    out = {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
-           "evidence_engine": eng, **verdict, "crosscheck": cross, "record": str(record.attrs.get("source", "")),
+    out = {"rows": rows, **choose(rows, models, force), "crosscheck": cross,
+           "record": str(record.attrs.get("source", "")),
            "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
            "input_interp": Inputs.from_record(record).interp}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     out["idata"] = fits
     return out
+
+
+def choose(rows: list[dict], models: Sequence[str], force: bool = False) -> dict:
+    """The model a set of fitted rows selects, as :func:`compare` selects it.
+
+    The route every model has (:func:`selection_route`), its Bayes factors,
+    the calibrated evidence (:func:`calibrated_evidence`) and :data:`SELECT_ON`
+    applied; an unconverged evidence selects nothing unless ``force``.
+
+    Returns
+    -------
+    dict
+        ``selected``, ``bayes_factors``, ``evidence_route``, ``evidence_engine``,
+        ``selected_by``, ``selected_on`` and the calibrated keys.
+    """
+    eng, route = selection_route(rows, models)
+    selected, factors, verdict = _select(rows, eng, route, force)
+    selected, factors, verdict = _select_on(selected, factors, verdict, calibrated_evidence(rows, eng, models))
+    return {"selected": selected, "bayes_factors": factors, "evidence_route": route, "evidence_engine": eng,
+            **verdict}
 
 
 def calibrated_evidence(rows: list[dict], eng: str | None, models: Sequence[str]) -> dict:

@@ -42,7 +42,7 @@ import numpy as np
 import xarray as xr
 
 from . import results
-from .comparison import compare, selection_route, table
+from .comparison import choose, compare, table
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.noise_floor import noise_floor, with_noise_floor
@@ -205,13 +205,15 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
         fits.update(out["idata"])
         for (m, e), idata in out["idata"].items():
             results.save(idata, out_dir / "fits" / f"{m.replace('+', '_')}__{e}.nc")
-    # selection across forms: one evidence route for all (the one every form has)
-    eng, route = selection_route(rows, list(budget.forms))
-    ln_z = {r["model"]: float(r["log_evidence"]) for r in rows if r["engine"] == eng and "error" not in r}
-    selected = max(ln_z, key=ln_z.get) if ln_z else None
-    factors = {m: ln_z[selected] - z for m, z in ln_z.items()} if selected else {}
-    return {"rows": rows, "selected": selected, "bayes_factors": factors, "evidence_route": route,
-            "evidence_engine": eng, "mcmc_skipped": skipped, "idata": fits}
+    # selection across forms as compare selects: the route every form has, on the calibrated evidence
+    ok = [r for r in rows if "error" not in r]
+    return {"rows": rows, **choose(ok, [f for f in budget.forms if any(r["model"] == f for r in ok)]),
+            "mcmc_skipped": skipped, "idata": fits}
+
+
+#: Keys of :func:`bayes_mr.comparison.choose` that ``summary.json`` carries besides ``selected`` and ``bayes_factors``.
+SELECTION_KEYS = ("evidence_engine", "selected_by", "selected_on", "unconverged", "evidence_scale",
+                  "log_evidence_calibrated", "bayes_factors_calibrated", "selected_calibrated")
 
 
 #: The forms the thesis identified on its shake table (Spencer's model is a device model with 14 parameters).
@@ -366,7 +368,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
 
     comp = _timed(timing, "compare", compare_forms, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
     selected = comp["selected"]
-    say(f"selected by {comp['evidence_route']} evidence: {selected}")
+    say(f"selected by {comp.get('selected_by') or comp['evidence_route']}: {selected}")
     sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget.forms, budget.noise,
                          comp["rows"], seed=seed, say=say)
     tab = table(comp)
@@ -393,6 +395,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         "record": info,
         "rows": comp["rows"], "selected": selected, "bayes_factors": comp["bayes_factors"],
         "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
+        **{k: comp[k] for k in SELECTION_KEYS if k in comp},
         "noise": budget.noise, "noise_sensitivity": sensitivity,
         "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
                                                      "force_nrmse": best["validation"]["force_nrmse"]},

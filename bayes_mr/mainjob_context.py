@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import xarray as xr
 
-from .comparison import compare
+from .comparison import calibrated_evidence, compare
 from .identify import predict
 from .models import get_model
 from .scores import score
@@ -26,7 +26,11 @@ def _laplace_choice(rows: list[dict]) -> dict:
     if not ln_z:
         return {"selected": None, "log_evidence": {}, "bayes_factors": {}}
     sel = max(ln_z, key=ln_z.get)
-    return {"selected": sel, "log_evidence": ln_z, "bayes_factors": {m: ln_z[sel] - z for m, z in ln_z.items()}}
+    ok = [r for r in rows if r["engine"] == "lsq" and "error" not in r]
+    cal = calibrated_evidence(ok, "lsq", list(ln_z))  # {} when a row lacks its Laplace terms
+    return {"selected": sel, "log_evidence": ln_z, "bayes_factors": {m: ln_z[sel] - z for m, z in ln_z.items()},
+            **{k: cal[k] for k in ("selected_calibrated", "bayes_factors_calibrated", "log_evidence_calibrated",
+                                   "evidence_scale") if k in cal}}
 
 
 def noise_sensitivity(part_a: xr.Dataset, forms: tuple[str, ...], noise: str, rows: list[dict], *,
@@ -44,7 +48,10 @@ def noise_sensitivity(part_a: xr.Dataset, forms: tuple[str, ...], noise: str, ro
     -------
     dict
         ``{noise: {"selected", "log_evidence", "bayes_factors", "n_eff"}}`` for
-        both residual models, each from lsq rows on part A.
+        both residual models, each from lsq rows on part A (the raw Laplace
+        evidence), with the calibrated evidence's ``selected_calibrated``,
+        ``bayes_factors_calibrated``, ``log_evidence_calibrated`` and
+        ``evidence_scale`` (:func:`bayes_mr.comparison.calibrated_evidence`).
     """
     other = "ar" if noise == "iid" else "iid"
     alt_rows = []

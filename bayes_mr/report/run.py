@@ -139,6 +139,35 @@ def spencer_table(spencer: dict) -> pd.DataFrame:
     return params
 
 
+def _runner_up(factors: dict, sel: str) -> tuple[str | None, float | None]:
+    """(runner-up, its ln BF) among ``factors`` = ln Z(best) − ln Z(model)."""
+    bf = {m: v for m, v in factors.items() if m != sel}
+    return (min(bf, key=bf.get), min(bf.values())) if bf else (None, None)
+
+
+def _selection_lines(summary: dict) -> list[str]:
+    """The selected model, on which evidence, and what the raw (working-likelihood) evidence says beside it."""
+    sel = summary["selected"]
+    if not sel:
+        unc = summary.get("unconverged")
+        return [f"No model selected: the {summary.get('evidence_route')} evidence did not converge"
+                + (f" ({', '.join(unc)})." if unc else ".")]
+    raw = summary["bayes_factors"]  # ln Z(selected) − ln Z(model) on the raw evidence: re-centred on its own best
+    raw_best = min(raw, key=raw.get)
+    r_run, r_bf = _runner_up({m: v - raw[raw_best] for m, v in raw.items()}, raw_best)
+    raw_txt = (f"the raw {summary['evidence_route']} evidence of the working likelihood picks **{raw_best}** "
+               f"(ln BF {fmt(r_bf, 3)} over {r_run})" if r_run else "")
+    if summary.get("selected_on") == "calibrated":
+        c_run, c_bf = _runner_up(summary["bayes_factors_calibrated"], sel)
+        return [f"Selected by the calibrated evidence: **{sel}** (ln BF {fmt(c_bf, 3)} over the runner-up, "
+                f"{c_run}). It is the Laplace evidence of the likelihood raised to k = "
+                f"{fmt(summary.get('evidence_scale'), 3)}, the power at which its curvature matches the calibrated "
+                f"covariance (residual correlation, input noise), so it counts the information in the record, not "
+                f"the number of samples; " + raw_txt + "."]
+    return [f"Selected by {summary['evidence_route']} evidence: **{sel}**"
+            + (f" (ln Bayes factor {fmt(r_bf, 3)} over the runner-up, {r_run})." if r_run else ".")]
+
+
 def _noise_lines(summary: dict) -> list[str]:
     """How the least-squares model choice and ln BF move between the iid and the AR residual model."""
     sens = summary.get("noise_sensitivity")
@@ -148,11 +177,7 @@ def _noise_lines(summary: dict) -> list[str]:
     if not iid["selected"] or not ar["selected"]:
         return []
 
-    def _runner(d):
-        bf = {m: v for m, v in d["bayes_factors"].items() if m != d["selected"]}
-        return (min(bf, key=bf.get), min(bf.values())) if bf else (None, None)
-
-    (ri, bi), (ra, ba) = _runner(iid), _runner(ar)
+    (ri, bi), (ra, ba) = _runner_up(iid["bayes_factors"], iid["selected"]), _runner_up(ar["bayes_factors"], ar["selected"])
     n_eff = ar["n_eff"].get(ar["selected"]) or {}
     n_txt = ", ".join(f"{ch} {fmt(v, 3)}" for ch, v in n_eff.items()) if isinstance(n_eff, dict) else fmt(n_eff, 3)
     same = "the same model" if iid["selected"] == ar["selected"] else "a different model"
@@ -160,7 +185,11 @@ def _noise_lines(summary: dict) -> list[str]:
             f"**{iid['selected']}** wins by ln BF {fmt(bi, 3)} over {ri}; with the AR residual model, which "
             f"counts the residual's correlation in time (effective independent samples: {n_txt}), "
             f"**{ar['selected']}** ({same}) wins by ln BF {fmt(ba, 3)} over {ra}. The comparison above uses "
-            f"`--noise {summary.get('noise', 'iid')}`."]
+            f"`--noise {summary.get('noise', 'iid')}`." + "".join(
+                f" Calibrated under {name}: **{d['selected_calibrated']}** by ln BF "
+                f"{fmt(_runner_up(d['bayes_factors_calibrated'], d['selected_calibrated'])[1], 3)} (k = "
+                f"{fmt(d.get('evidence_scale'), 3)})." for name, d in (("iid", iid), ("ar", ar))
+                if d.get("selected_calibrated"))]
 
 
 def _floor_sentence(rec: dict) -> str:
@@ -184,11 +213,7 @@ def headline(summary: dict) -> list[str]:
                  f"{rec['masked']} samples masked by quality control. "
                  f"Part A (training) {rec['part_a_s']:.1f} s, part B (never fitted) {rec['part_b_s']:.1f} s."
                  + _floor_sentence(rec))
-    if sel:
-        bf = {m: v for m, v in summary["bayes_factors"].items() if m != sel}
-        runner = min(bf, key=bf.get) if bf else None
-        lines.append(f"Selected by {summary['evidence_route']} evidence: **{sel}**"
-                     + (f" (ln Bayes factor {fmt(bf[runner], 3)} over the runner-up, {runner})." if runner else "."))
+    lines += _selection_lines(summary)
     lines += _noise_lines(summary)
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
     if chains:
