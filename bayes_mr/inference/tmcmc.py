@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import logsumexp
 
-from .evidence import Evidence
 from .ladder import Reference, _Path
 
 
@@ -131,7 +130,8 @@ class Counted:
 
 @dataclass
 class TMCMCResult:
-    """A finished TMCMC run.
+    """A finished TMCMC run (its :class:`~bayes_mr.inference.evidence.Evidence` is
+    :func:`bayes_mr.inference.evidence.tmcmc_evidence` of it).
 
     Attributes
     ----------
@@ -171,14 +171,12 @@ class TMCMCResult:
     unhealthy: list = field(default_factory=list)
     wall_s: float = 0.0
 
-    def evidence(self) -> Evidence:
-        """The run as an :class:`~bayes_mr.inference.evidence.Evidence` (route ``tmcmc``)."""
-        return Evidence("tmcmc", self.log_z, self.log_z_error, 0.0, self.log_z_error, self.wall_s, details={
-            "n_stages": len(self.stages), "betas": self.betas.tolist(), "n_evals": int(self.n_evals),
-            "n_evals_evidence": int(self.n_evals_evidence),
-            "n_eves": int(self.n_eves), "naive_error": float(self.naive_error),
-            "ess": [s["ess"] for s in self.stages], "acceptance": [s["acceptance"] for s in self.stages]},
-            unconverged=list(self.unhealthy))
+    def details(self) -> dict:
+        """Plain-Python per-run numbers for :class:`~bayes_mr.inference.evidence.Evidence` ``details``."""
+        return {"n_stages": len(self.stages), "betas": self.betas.tolist(), "n_evals": int(self.n_evals),
+                "n_evals_evidence": int(self.n_evals_evidence), "n_eves": int(self.n_eves),
+                "naive_error": float(self.naive_error), "ess": [s["ess"] for s in self.stages],
+                "acceptance": [s["acceptance"] for s in self.stages], "moved": [s["moved"] for s in self.stages]}
 
 
 # --- the pieces of one stage -------------------------------------------------------------

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from bayes_mr.inference.evidence import tmcmc_evidence
 from bayes_mr.inference.ladder import BoxTarget
 from bayes_mr.inference.tmcmc import TMCMCSettings, eve_relative_variance, next_beta, run_tmcmc
-from inference.test_evidence import gaussian_target
+from inference.test_evidence import gaussian_target, linear_device_problem
 
 
 def bimodal_target(weight: float = 0.3, separation: float = 12.0, d: int = 2):
@@ -45,7 +46,7 @@ def test_tmcmc_recovers_the_analytic_evidence_of_a_linear_gaussian_problem(d):
     target, mu, C, log_z = gaussian_target(30.0, d=d)
     for seed in range(3):
         res = run_tmcmc(target, TMCMCSettings(n_particles=1000, seed=seed))
-        ev = res.evidence()
+        ev = tmcmc_evidence(res)
         assert ev.converged and ev.route == "tmcmc"
         assert abs(ev.log_z - log_z) <= 3 * ev.total_error, (seed, ev.log_z - log_z, ev.total_error)
         assert abs(ev.log_z - log_z) < 0.5
@@ -64,7 +65,7 @@ def test_tmcmc_finds_both_modes_of_a_bimodal_posterior_and_their_evidence():
     """
     target, (m1, m2), _, log_z = bimodal_target()
     res = run_tmcmc(target, TMCMCSettings(n_particles=1000, seed=4))
-    ev = res.evidence()
+    ev = tmcmc_evidence(res)
     assert ev.converged
     assert abs(ev.log_z - log_z) <= 3 * ev.total_error and abs(ev.log_z - log_z) < 0.5, (ev.log_z - log_z,
                                                                                         ev.total_error)
@@ -77,7 +78,7 @@ def test_a_starved_run_is_flagged_and_its_evidence_refused():
     from bayes_mr.comparison import _select
 
     target, *_ = gaussian_target(30.0, d=3)
-    ev = run_tmcmc(target, TMCMCSettings(n_particles=20, seed=0)).evidence()
+    ev = tmcmc_evidence(run_tmcmc(target, TMCMCSettings(n_particles=20, seed=0)))
     assert not ev.converged and ev.to_dict()["converged"] is False
     rows = [{"model": "a", "engine": "mcmc", "log_evidence": ev.log_z, "evidence_route": "tmcmc",
              "evidence_routes": {"tmcmc": ev.to_dict()}},
@@ -86,7 +87,7 @@ def test_a_starved_run_is_flagged_and_its_evidence_refused():
     selected, _, verdict = _select(rows, "mcmc", "tmcmc", force=False)
     assert selected is None and "refused" in verdict
     # a healthy run of the same problem is not flagged
-    assert run_tmcmc(target, TMCMCSettings(n_particles=1000, seed=0)).evidence().converged
+    assert tmcmc_evidence(run_tmcmc(target, TMCMCSettings(n_particles=1000, seed=0))).converged
 
 
 def test_next_beta_hits_the_target_coefficient_of_variation():
@@ -110,3 +111,16 @@ def test_the_eve_variance_of_one_stage_is_the_importance_sampling_variance():
     rel = eve_relative_variance(np.arange(w.size), log_w, 0)
     assert rel == pytest.approx(np.var(w) / (w.size * w.mean() ** 2), rel=1e-3)
     assert eve_relative_variance(np.zeros(w.size, int), log_w, 5) == pytest.approx(1.0)  # one Eve left: no information
+
+
+def test_the_opt_in_route_on_an_output_error_posterior_matches_the_analytic_evidence():
+    """``Emcee(evidence="tmcmc")``: TMCMC from the posterior's reference q selects, Laplace beside it."""
+    from bayes_mr.inference.estimators import Emcee
+    from bayes_mr.inference.mcmc import MCMCSettings
+
+    lik, log_z, _ = linear_device_problem()
+    settings = MCMCSettings(seed=0, progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)
+    post = Emcee(settings=settings, evidence="tmcmc").fit(lik, seed=0, progress=False)
+    route = post.info["evidence_routes"]["tmcmc"]
+    assert post.info["evidence_route"] == "tmcmc" and route["converged"]
+    assert abs(post.log_evidence - log_z) <= 3 * route["total_error"] and route["total_error"] < 0.05
