@@ -119,8 +119,8 @@ class Emcee:
         else:
             routes = {"laplace": laplace_evidence(res)}
         if self.evidence == "tmcmc":
-            routes["tmcmc"] = tmcmc_evidence(run_tmcmc(likelihood, TMCMCSettings(start="reference", seed=seed),
-                                                       posterior=chain))
+            beside = TMCMCSettings(start="reference", final_moves=False, seed=seed)  # the chain is the posterior
+            routes["tmcmc"] = tmcmc_evidence(run_tmcmc(likelihood, beside, posterior=chain))
         return mcmc_posterior(likelihood, chain, res, evidence=routes)
 
 
