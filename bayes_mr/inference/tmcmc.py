@@ -35,7 +35,9 @@ Health (``unconverged``: the β of every stage that fails, like a failed rung,
 so ``compare`` refuses it): a stage fails if the effective sample size of its
 weights (Σw)²/Σw² is below ``min_ess`` (default max(50, 10·d)), or if fewer than
 ``min_moved`` of its particles moved in its MCMC (the population is then
-duplicates). A run that needs more than ``max_stages`` stages raises.
+duplicates); and β = 1 is flagged when the last stage descends from fewer than
+``min_eves`` stage-0 particles (the error bar is then meaningless). A run that
+needs more than ``max_stages`` stages raises.
 
 Verdict — measured by ``scripts/measure_tmcmc.py`` (single process, under load from
 other jobs; N = 1000 particles; TI/SS = the reference-path ladder of
@@ -111,6 +113,9 @@ class TMCMCSettings:
         Weight ESS a healthy stage needs (default max(50, 10·d)).
     min_moved : float
         Fraction of particles a healthy stage's MCMC must have moved.
+    min_eves : int
+        Distinct stage-0 ancestors the last stage needs; with fewer the Eve
+        error bar has nothing to stand on and the run is flagged (at β = 1).
     start : {"prior", "reference"}
         β = 0 is the prior box or the reference Gaussian q of a posterior chain.
     final_moves : bool
@@ -129,6 +134,7 @@ class TMCMCSettings:
     max_stages: int = 400
     min_ess: float | None = None
     min_moved: float = 0.8
+    min_eves: int = 20
     start: str = "prior"
     final_moves: bool = True
     seed: int = 0
@@ -385,7 +391,10 @@ def run_tmcmc(target, settings: TMCMCSettings = TMCMCSettings(), *, posterior=No
         if stage["ess"] < min_ess or stage["moved"] < s.min_moved:
             unhealthy.append(beta)
     rel = eve_relative_variance(last[1], last[0], len(stages) - 1)
+    n_eves = int(np.unique(last[1]).size)
+    if n_eves < s.min_eves and 1.0 not in unhealthy:
+        unhealthy.append(1.0)
     return TMCMCResult(log_z=log_z, log_z_error=math.sqrt(rel + var_extra), naive_error=math.sqrt(naive_var + var_extra),
                        particles=x, betas=np.array(betas), stages=stages, n_evals=counted.n_evals,
                        n_evals_evidence=evals_before,
-                       n_eves=int(np.unique(last[1]).size), unhealthy=unhealthy, wall_s=_time.perf_counter() - t0)
+                       n_eves=n_eves, unhealthy=unhealthy, wall_s=_time.perf_counter() - t0)
