@@ -40,7 +40,7 @@ duplicates); and β = 1 is flagged when the last stage descends from fewer than
 needs more than ``max_stages`` stages raises.
 
 Verdict — measured by ``scripts/measure_tmcmc.py`` (single process, under load from
-other jobs; N = 1000 particles; TI/SS = the reference-path ladder of
+other jobs; N = 1000 particles (500 on dahl); TI/SS = the reference-path ladder of
 :mod:`~bayes_mr.inference.evidence` whose evaluations include the emcee
 posterior it needs; "evals" of TMCMC are those ln Ẑ needed). Bias and SD of
 ln Ẑ − ln Z over 5 seeds:
@@ -58,11 +58,20 @@ bimodal 0.3/0.7, 12 SD      **−1.204** ± 0.005 **−1.204** ± 0.005 −0.06 
 Reported errors were honest (|z| ≤ 2 on every unimodal run; mean reported
 error 0.145–0.17 against SD 0.15 from the prior, where the stage-wise
 "naive" error, 0.09–0.12, is optimistic — the Eve estimator is the one used).
-DAHL_RESULTS
+Simulated dahl structure test, 4 s at 250 Hz (1 % output noise, 6-D with the
+two ln σ; ln Z unknown, so against TI), 3 seeds, generic kernels: TI
+13377.982, SD 0.004 (error 0.004), 87 k evals, 255 s; SS agrees (SD 0.005);
+**TMCMC from the prior (N = 500) lands 40–109 nats low** (SD 37), 93 k evals,
+213 s: the population settles in a secondary mode and the genealogy collapses
+to 1–2 Eves — all three runs are flagged (fewer than 80 % of particles moved
+at β ≈ 1e-3–5e-3, and the Eve floor), so ``compare`` would refuse them, but
+its error bar (0.7–1.0) is no guide; TMCMC from q (N = 500, one stage) −0.003
+± 0.012 from TI with error 0.008, 500 evals (+ the posterior chain), 10 s.
 
 So: **from the prior (the field's way) TMCMC does not earn the selecting
-place** — at 1.5–4× TI's likelihood evaluations its error is 15–40× larger
-(work-normalised variance ~10³× worse), because it pays the whole
+place** — on the model record it is wrong by tens of nats (flagged), and on
+the analytic cases, at 1.5–4× TI's likelihood evaluations, its error is 15–40×
+larger (work-normalised variance ~10³× worse), because it pays the whole
 prior-to-posterior information gain in stages of CoV 1 with a few hundred
 surviving lineages. Its batched likelihood makes it fast per evaluation
 (0.24 ms against emcee's 2 ms on the device record), not enough to close
@@ -70,13 +79,17 @@ that gap. It has one **robustness advantage** the ladder has not: a mode the
 β = 1 emcee chain never visited is invisible to TI and SS (and to TMCMC from
 q, which inherits the chain's reference), which then report ln Z off by
 ln 0.3 with an error bar of 0.005 and every rung converged; TMCMC from the
-prior finds both modes and their shares. **From the reference q** it is
+prior finds both modes and their shares — on a toy; on the dahl record the
+same search ended in the wrong mode. **From the reference q** it is
 importance sampling from q in one stage whenever q's weights have CoV ≤ 1
-(every unimodal case here) — as accurate as TI/SS for 1/20–1/33 of the
-ladder's evaluations, and it adds stages by itself where q fits badly. It
+(every unimodal case here, dahl included) — as accurate as TI/SS for
+1/20–1/140 of the ladder's evaluations, and it adds stages by itself where q
+fits badly (not measured here: a posterior piled on a bound, LuGre's ε). It
 stays an opt-in route (``Emcee(evidence="tmcmc")``, from q; or beside TI via
-:func:`~bayes_mr.inference.evidence.evidence_routes`) because making it the
-default would change default results; the measurements say it could be.
+:func:`~bayes_mr.inference.evidence.evidence_routes`): making it the default
+would change default results, and the non-Gaussian case is unmeasured; on
+these measurements it is the cheaper route wherever the posterior chain has
+found every mode.
 """
 
 from __future__ import annotations
