@@ -85,10 +85,11 @@ class Emcee:
     ----------
     settings : MCMCSettings, optional
         Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``).
-    evidence : {"ti", "laplace"}
+    evidence : {"ti", "laplace", "tmcmc"}
         ``"ti"``: thermodynamic integration over a temperature ladder, with
         stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
-        cheap route.
+        cheap route; ``"tmcmc"`` (opt-in): transitional MCMC from the
+        posterior's reference q (:mod:`bayes_mr.inference.tmcmc`), Laplace beside it.
     executor : object, optional
         Runs the evidence ladder's rungs (``concurrent.futures`` or a dask
         Client; same numbers). A fit that itself runs on a Dask worker sends
@@ -101,14 +102,15 @@ class Emcee:
     executor: object | None = None
 
     def __post_init__(self):
-        if self.evidence not in ("ti", "laplace"):
-            raise ValueError(f"evidence must be 'ti' or 'laplace', got {self.evidence!r}")
+        if self.evidence not in ("ti", "laplace", "tmcmc"):
+            raise ValueError(f"evidence must be 'ti', 'laplace' or 'tmcmc', got {self.evidence!r}")
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Least squares, then the chain from its optimum, then the evidence routes."""
-        from .evidence import evidence_routes, laplace_evidence
+        from .evidence import evidence_routes, laplace_evidence, tmcmc_evidence
         from .mcmc import MCMCSettings, fit_mcmc
         from .mcmc_posterior import mcmc_posterior
+        from .tmcmc import TMCMCSettings, run_tmcmc
 
         res = fit_lsq(likelihood, LSQSettings(seed=seed))
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
@@ -118,6 +120,9 @@ class Emcee:
                 routes = evidence_routes(likelihood, lsq=res, posterior=chain, seed=seed, executor=ex)
         else:
             routes = {"laplace": laplace_evidence(res)}
+        if self.evidence == "tmcmc":
+            beside = TMCMCSettings(start="reference", final_moves=False, seed=seed)  # the chain is the posterior
+            routes["tmcmc"] = tmcmc_evidence(run_tmcmc(likelihood, beside, posterior=chain))
         return mcmc_posterior(likelihood, chain, res, evidence=routes)
 
 

@@ -59,16 +59,17 @@ an error bar; TI's error splits into Monte Carlo and ladder parts.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import logsumexp
 
 from .ladder import LADDER_SETTINGS, Ladder, mean_variance, run_ladder
 from .mcmc import MCMCResult, MCMCSettings
+from .tmcmc import TMCMCResult, TMCMCSettings, run_tmcmc
 
-#: Routes in order of preference for model selection.
-PREFERENCE = ("ti", "laplace")
+#: Routes in order of preference for model selection (``tmcmc`` only where asked for, without TI).
+PREFERENCE = ("ti", "tmcmc", "laplace")
 
 
 @dataclass(frozen=True)
@@ -179,6 +180,12 @@ def stepping_stone(ladder: Ladder) -> Evidence:
         "path": ladder.path, "betas": b.tolist(), "ln_ratio": stones}, unconverged=ladder.unconverged())
 
 
+def tmcmc_evidence(res: TMCMCResult) -> Evidence:
+    """Transitional MCMC's ln Z (:mod:`bayes_mr.inference.tmcmc`); its unhealthy stages count as unconverged."""
+    return Evidence("tmcmc", res.log_z, res.log_z_error, 0.0, res.log_z_error, res.wall_s, details=res.details(),
+                    unconverged=list(res.unhealthy))
+
+
 # --- the package's routes ----------------------------------------------------------------
 
 def evidence_routes(
@@ -192,6 +199,7 @@ def evidence_routes(
     betas: np.ndarray | None = None,
     seed: int = 0,
     executor=None,
+    tmcmc: TMCMCSettings | None = None,
 ) -> dict[str, Evidence]:
     """Laplace, TI and stepping-stone evidence of an OutputError posterior.
 
@@ -208,11 +216,14 @@ def evidence_routes(
     seed : int
     executor : object, optional
         Runs the ladder's rungs as jobs (:func:`bayes_mr.inference.ladder.run_ladder`).
+    tmcmc : TMCMCSettings, optional
+        Also transitional MCMC (opt-in route ``tmcmc``, seeded by ``seed``;
+        with ``start="reference"`` from q of ``posterior``).
 
     Returns
     -------
     dict
-        ``{"laplace": Evidence, "ti": Evidence, "ss": Evidence}``; the one to
+        ``{"laplace": Evidence, "ti": Evidence, "ss": Evidence}`` (and ``"tmcmc"``); the one to
         select with is :func:`select_route` of it.
     """
     from .lsq import LSQSettings, fit_lsq
@@ -224,5 +235,7 @@ def evidence_routes(
         posterior = fit_mcmc(lik, lsq=lsq, settings=mcmc_settings or MCMCSettings(seed=seed))
     ladder = run_ladder(lik, posterior, path=path, betas=betas, settings=ladder_settings, seed=seed,
                         executor=executor)
-    return {"laplace": laplace_evidence(lsq), "ti": thermodynamic_integration(ladder),
-            "ss": stepping_stone(ladder)}
+    out = {"laplace": laplace_evidence(lsq), "ti": thermodynamic_integration(ladder), "ss": stepping_stone(ladder)}
+    if tmcmc is not None:
+        out["tmcmc"] = tmcmc_evidence(run_tmcmc(lik, replace(tmcmc, seed=seed), posterior=posterior))
+    return out
