@@ -15,13 +15,13 @@ from pathlib import Path
 
 def main(argv: list[str]) -> int:
     """Compile ``argv`` = [module path, kernel name, types file, marker]; 0 on success."""
-    from bayes_mr._specialise import _load, _write_atomic
+    from bayes_mr._specialise import _load, mark_ready
 
     path, name, types_file, marker = argv
     argtypes = pickle.loads(bytes.fromhex(Path(types_file).read_text()))
     fn = getattr(_load(Path(path)), name)
     fn.compile(argtypes)  # a cached dispatcher saves the overload to numba's cache here
-    _write_atomic(Path(marker), f"{name} {argtypes!r}\n")
+    mark_ready(Path(marker), name, argtypes)
     return 0
 
 

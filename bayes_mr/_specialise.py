@@ -71,6 +71,7 @@ _lock = threading.RLock()
 _work: dict[tuple, float] = {}
 _paths: dict[tuple, Path] = {}
 _started: set[Path] = set()
+_markers: dict[tuple, Path] = {}
 
 
 def cache_dir() -> Path:
@@ -261,8 +262,17 @@ def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
 
 def ready_path(path: Path, argtypes: tuple) -> Path:
     """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``."""
-    h = hashlib.sha256(repr(argtypes).encode()).hexdigest()[:12]
-    return path.with_name(f"{path.stem}.{h}.ready")
+    key = (path, argtypes)
+    marker = _markers.get(key)  # memoised: every kernel call asks
+    if marker is None:
+        h = hashlib.sha256(repr(argtypes).encode()).hexdigest()[:12]
+        marker = _markers[key] = path.with_name(f"{path.stem}.{h}.ready")
+    return marker
+
+
+def mark_ready(marker: Path, name: str, argtypes: tuple) -> None:
+    """Write ``marker``: kernel ``name`` is in numba's disk cache for ``argtypes``."""
+    _write_atomic(marker, f"{name} {argtypes!r}\n")
 
 
 def _start_background(dispatcher, lay_t: tuple[int, ...], argtypes: tuple) -> None:
@@ -312,7 +322,7 @@ class _Auto:
         if marker.exists() or self.eager:
             out = specialised(self.dispatcher, self.lay)(*args)
             if not marker.exists():
-                _write_atomic(marker, f"{self.dispatcher.py_func.__name__} {argtypes!r}\n")
+                mark_ready(marker, self.dispatcher.py_func.__name__, argtypes)
             return out
         if self.pays:
             _start_background(self.dispatcher, self.lay, argtypes)
