@@ -144,7 +144,7 @@ class UKF:
         Choose the run by its MSE on this record (thesis method 2); default
         the fitted record itself (method 1).
     n_draws : int
-        Draws from the selected run's final Gaussian.
+        Draws from the selected run's final Gaussian, truncated to the prior box (as least squares').
     chunk_size : int, optional
         Runs per training chunk.
     """
@@ -189,7 +189,10 @@ class UKF:
         uncertainty = calibrate.describe(lap, likelihood.channels)
         uncertainty["covariance"] = f"max(filter, {uncertainty['covariance']} at the point)"
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
-        draws_phi = rng.multivariate_normal(phi, 0.5 * (cov + cov.T), size=self.n_draws, method="eigh")
+        # the same prior box as every engine's: a direction the record hardly sees is bounded by the prior,
+        # not carried to exp(φ) = inf (lugre's ε in the coverage study)
+        draws_phi, n_clipped = laplace_draws(phi, 0.5 * (cov + cov.T), likelihood.phi_lo, likelihood.phi_hi,
+                                             self.n_draws, rng)
         x = draws_phi
         if likelihood.noise == "sampled":
             x = np.hstack([draws_phi, np.tile(np.log(likelihood.noise_sd), (self.n_draws, 1))])
@@ -202,6 +205,7 @@ class UKF:
             "validated_on": str(validation.attrs.get("source", "")),
             "interrupted": int(training.attrs["interrupted"]), "training_wall_s": float(training.attrs["wall_s"]),
             "refine_passes": ref["passes"], "refined_log_lik": ref["log_lik"], "uncertainty": uncertainty,
+            "draws_clipped": n_clipped,
         }
         return Posterior(
             engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,
