@@ -25,7 +25,7 @@ import xarray as xr
 from ..executor import job_executor
 from ..likelihood import OutputError
 from .base import Posterior, laplace_draws
-from .lsq import LSQResult, LSQSettings, fit_lsq, laplace
+from .lsq import LSQResult, LSQSettings, fit_lsq, peak_from
 from . import calibrate, ukf
 from .evidence_scale import calibration_info
 from .ukf import TAUS, UKFSettings
@@ -147,6 +147,21 @@ class UKF:
         Draws from the selected run's final Gaussian, truncated to the prior box (as least squares').
     chunk_size : int, optional
         Runs per training chunk.
+    peak_nfev : int
+        Most model evaluations of a local least-squares search from the
+        filter's estimate to the output-error likelihood's peak (0: none, the
+        filter's covariance alone). The filter's estimate stays the point; its
+        offset δ from the peak is added to the filter's covariance (δδᵀ, a
+        mean-squared-error matrix), so the interval holds both where the
+        filter ended and where the record's likelihood peaks. Measured on the
+        coverage study's 18 records (3 LHS × 2 τ priors): on two LuGre records
+        the chosen run sat in another basin (ε ≈ 0.3 where the peak has
+        ε ≈ 18; c 7 SD off with 100 priors); with the offset every one of the
+        90 true values lay within 2.4 SD, 85 of 90 inside the 90 % interval.
+        This replaces a floor at least squares' calibrated sandwich, which
+        over-covered: the filter treats input noise as process noise and its
+        estimates lay 3× closer to the truth than that sandwich said (median
+        |z| 0.23 on Dahl records, against 0.67 for a calibrated interval).
     """
 
     settings: UKFSettings = field(default_factory=UKFSettings)
@@ -156,6 +171,7 @@ class UKF:
     validate_on: xr.Dataset | None = None
     n_draws: int = 1000
     chunk_size: int | None = None
+    peak_nfev: int = 40
     name: str = "ukf"
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
@@ -182,12 +198,14 @@ class UKF:
         ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
                          run["final_cov_phi"].values, self.settings)
         phi, cov = ref["phi"], ref["cov"]
-        # the filter's covariance was up to ~2x narrower than the spread of output-error estimates under
-        # input noise (studies/coverage.py): never report less than least squares' calibrated sandwich here
-        lap = laplace(likelihood, phi)
-        cov = calibrate.loewner_max(cov, lap.cov_phi)
-        uncertainty = calibrate.describe(lap, likelihood.channels)
-        uncertainty["covariance"] = f"max(filter, {uncertainty['covariance']} at the point)"
+        # the filter's own Gaussian, widened by its offset from the likelihood's peak (UKF.peak_nfev)
+        uncertainty = {"covariance": "filter"}
+        if self.peak_nfev > 0:
+            peak = peak_from(likelihood, phi, self.peak_nfev)
+            delta = peak["delta"]
+            uncertainty.update(covariance="filter + offset to the likelihood's peak", peak_nfev=peak["nfev"],
+                               peak_offset_sd=float(np.sqrt(max(delta @ np.linalg.pinv(cov) @ delta, 0.0))))
+            cov = cov + np.outer(delta, delta)
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         # the same prior box as every engine's: a direction the record hardly sees is bounded by the prior,
         # not carried to exp(φ) = inf (lugre's ε in the coverage study)

@@ -237,6 +237,33 @@ def _refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
     )
 
 
+def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
+    """The likelihood's local peak reached downhill from ``phi0`` (bounded trust-region least squares).
+
+    How far another estimator's answer (the UKF's) lies from the output-error
+    likelihood's own optimum. Residuals are weighted by the record's noise SDs,
+    or (``noise="sampled"``) by their maximum-likelihood values at ``phi0``.
+
+    Returns
+    -------
+    dict
+        ``phi`` the peak [φ], ``delta`` = phi − phi0 [φ], ``nfev`` the model
+        evaluations used and ``improved`` (False: no lower cost was found and
+        delta is zero).
+    """
+    phi0 = np.asarray(phi0, float)
+    sd = np.asarray(lik.noise_sd, float)
+    if lik.noise == "sampled":
+        yhat, _ = lik.predict(phi0)
+        sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
+    res_fn = _Residuals(lik, sd)
+    cost0 = 0.5 * float(np.sum(res_fn(phi0) ** 2))
+    res = _refine(lik, phi0, sd, max_nfev)
+    improved = bool(np.all(np.isfinite(res.x)) and res.cost < cost0)
+    phi = res.x if improved else phi0
+    return {"phi": phi, "delta": phi - phi0, "nfev": int(res.nfev), "improved": improved}
+
+
 def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress=None) -> LSQResult:
     """Least-squares fit of ``lik``'s model to its record (see module docstring).
 
