@@ -34,11 +34,10 @@ never narrows what the data's own residual says.
 Every engine reads it: least squares reports it as ``cov_phi``; the MCMC
 draws are adjusted to it (:func:`adjust_draws`: an affine map about the
 posterior mode whose image has this covariance, the curvature adjustment of
-Ribatet, Cooley & Davison 2012 and Shaby 2014); the UKF, whose filter carries
-the input noise as process noise but still came out up to ~2× too narrow,
-reports :func:`loewner_max` of its filter covariance and least squares'
-sandwich at its own point (``inference/estimators.py``). Measured by
-``studies/coverage.py``.
+Ribatet, Cooley & Davison 2012 and Shaby 2014). The UKF does not use it: its
+filter carries the input noise as process noise, and it reports its own
+covariance plus its offset from the likelihood's peak (``UKF.peak_nfev`` in
+``inference/estimators.py``). Measured by ``studies/coverage.py``.
 """
 
 from __future__ import annotations
