@@ -90,10 +90,11 @@ def write_study(name: str, out: Path, readme: Path) -> bool:
     body = "\n".join(lines[1:] if lines and lines[0].startswith("# ") else lines)
     figure_dir = readme.parent / "figures"
     figure_dir.mkdir(parents=True, exist_ok=True)
-    for png in sorted(out.glob("*.png")):
+    for png in sorted(out.rglob("*.png")):  # the report's own figures, beside it or in a subfolder
+        rel = png.relative_to(out).as_posix()
         target = figure_dir / f"{name}_{png.name}"
         shutil.copyfile(png, target)
-        body = body.replace(f"]({png.name})", f"]({figure_dir.name}/{target.name})")
+        body = body.replace(f"]({rel})", f"]({figure_dir.name}/{target.name})")
     return update_section(readme, name, body)
 
 
