@@ -87,8 +87,13 @@ def _markdown(out: dict) -> str:
         f"Record {out['record']['source']}, part A {out['record']['part_a_s']:.1f} s to train, part B "
         f"{out['record']['part_b_s']:.1f} s never fitted; search at {out['record']['fs']:.0f} Hz, final refit at "
         f"{hi['fs']:.0f} Hz. Added: {', '.join(ext['added']) or 'nothing'}. What part B still holds against its "
-        f"noise floor (worst channel ratio, at the search rate): {ext.get('unexplained_ratio_b')}.", "",
+        f"noise floor (worst channel ratio, at the search rate): {_ratio(ext.get('unexplained_ratio_b'))}.", "",
         *rows, "", f"Wall time {out['wall_s']:.0f} s.", "", "![part B](extension_part_b.png)", ""])
+
+
+def _ratio(value) -> str:
+    """A residual-to-floor ratio for the report: three significant digits, or why there is none."""
+    return "not measured" if value is None else f"{value:.3g}"
 
 
 def main(out_dir: str | Path = "results/studies/damper-extension", quick: bool = False, seed: int = 0) -> dict:
