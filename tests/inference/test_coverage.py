@@ -85,6 +85,26 @@ def test_loewner_max_is_the_larger_in_every_direction():
         assert u @ m @ u >= max(u @ a @ u, u @ b @ u) - 1e-9
 
 
+def test_loewner_max_with_a_singular_side_stays_finite():
+    """A zero or rank-deficient middle (input noise that moves no output) gives the other side, not 1e240."""
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=(5, 3))
+    b = v @ v.T + 1e-3 * np.eye(5)
+    assert np.allclose(loewner_max(np.zeros((5, 5)), b), b, rtol=1e-9, atol=1e-12)
+    w = rng.normal(size=(5, 2))
+    a = 10.0 * w @ w.T  # rank 2
+    m = loewner_max(a, b)
+    assert np.all(np.isfinite(m)) and np.max(np.abs(m)) < 1e3 * max(np.abs(a).max(), np.abs(b).max())
+    for u in rng.normal(size=(20, 5)):
+        assert u @ m @ u >= max(u @ a @ u, u @ b @ u) - 1e-9
+    # and for a positive definite side it is a^{1/2} max(I, a^{-1/2} b a^{-1/2}) a^{1/2}
+    a = a + np.eye(5)
+    s, q = np.linalg.eigh(a)
+    half, inv = (q * np.sqrt(s)) @ q.T, (q / np.sqrt(s)) @ q.T
+    mu, r = np.linalg.eigh(inv @ b @ inv)
+    assert np.allclose(loewner_max(a, b), half @ ((r * np.maximum(mu, 1.0)) @ r.T) @ half, rtol=1e-10)
+
+
 @pytest.mark.slow
 def test_every_engine_covers_80_to_97_percent():
     """The full coverage study (6 truths per form × 3 forms, lsq/emcee under iid and AR, the UKF): every
