@@ -252,12 +252,10 @@ def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
         delta is zero).
     """
     phi0 = np.asarray(phi0, float)
-    sd = np.asarray(lik.noise_sd, float)
-    if lik.noise == "sampled":
-        yhat, _ = lik.predict(phi0)
-        sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
-    res_fn = _Residuals(lik, sd)
-    cost0 = 0.5 * float(np.sum(res_fn(phi0) ** 2))
+    yhat, sim = lik.predict(phi0)  # one simulation for σ and the starting cost
+    sd = _ml_sd(lik, yhat[0]) if lik.noise == "sampled" else np.asarray(lik.noise_sd, float)
+    r0 = _standardised(lik, yhat[0], sd)
+    cost0 = 0.5 * float(np.sum(r0**2)) if sim.ok[0] and np.all(np.isfinite(r0)) else math.inf
     res = _refine(lik, phi0, sd, max_nfev)
     improved = bool(np.all(np.isfinite(res.x)) and res.cost < cost0)
     phi = res.x if improved else phi0
@@ -296,7 +294,7 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
         yhat, _ = lik.predict(phi)
-        sd = np.maximum(_ml_sd(lik, yhat[0]), 1e-12 * np.std(lik.y[lik.valid], axis=0))
+        sd = _ml_sd(lik, yhat[0])
         res = _refine(lik, phi, sd, settings.max_nfev)
         phi = res.x
     return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
@@ -339,11 +337,15 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
 
 
 def _ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:
-    """Maximum-likelihood σ_c at a prediction (N, C): the residual RMS, under AR the innovation RMS."""
+    """Maximum-likelihood σ_c at a prediction (N, C): the residual RMS, under AR the innovation RMS.
+
+    Floored at 1e-12 of each channel's SD, so that a perfect fit still weights its residuals."""
     if lik.residual.kind == "iid":
-        return np.sqrt(np.mean((lik.y - yhat)[lik.valid] ** 2, axis=0))
-    white = lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))
-    return np.sqrt(np.sum(white**2, axis=0) / noise_model.counts(lik.valid, lik.residual.orders))
+        sd = np.sqrt(np.mean((lik.y - yhat)[lik.valid] ** 2, axis=0))
+    else:
+        white = lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))
+        sd = np.sqrt(np.sum(white**2, axis=0) / noise_model.counts(lik.valid, lik.residual.orders))
+    return np.maximum(sd, 1e-12 * np.std(lik.y[lik.valid], axis=0))
 
 
 def _ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[float, float, np.ndarray, float]:
@@ -390,8 +392,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         lik.choose_residual_orders(phi)
     if sampled:
         # σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
-        floor = 1e-12 * np.std(lik.y[lik.valid], axis=0)
-        sigma = np.maximum(_ml_sd(lik, yhat[0]), floor)
+        sigma = _ml_sd(lik, yhat[0])
     else:
         sigma = np.asarray(lik.noise_sd, float)
     rf = _Residuals(lik, sigma)
