@@ -201,6 +201,45 @@ def loewner_max(a: np.ndarray, b: np.ndarray, rtol: float = 1e-12) -> np.ndarray
     return (x * np.maximum(mu, 1.0 - mu)) @ x.T
 
 
+#: A direction of the prior-scaled information whose eigenvalue is below this fraction of the largest is
+#: one the record does not see (the pseudo-inverses above give it zero variance); comfortably above
+#: ``numpy.linalg.pinv``'s own cut (1e-15), far below any direction a record determines.
+UNSEEN_RTOL = 1e-12
+
+
+def prior_on_unseen(cov: np.ndarray, info: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """``cov`` [φ²] with the uniform prior's variance in the directions the information ``info`` does not see.
+
+    Every covariance here is built on a pseudo-inverse of the information
+    JᵀJ, which gives a direction with no information (a voltage parameter on
+    a record without a command, a law a saturated state switches off) zero
+    variance: the parameter would be reported as known to the last digit.
+    The posterior there is the prior, uniform on the box. In the box's scaled
+    frame (φ / width, the prior the unit cube, variance 1/12 along any unit
+    direction) the null space of D JᵀJ D, D = diag(widths), is found by
+    :data:`UNSEEN_RTOL` and given that variance; it is orthogonal to the range
+    of the pseudo-inverse, so every seen direction keeps its covariance
+    exactly. Draws are then truncated to the box (:func:`~.base.laplace_draws`).
+
+    Parameters
+    ----------
+    cov : ndarray (p, p)
+        Covariance of φ built on ``pinv(info)``.
+    info : ndarray (p, p)
+        JᵀJ (or any information with the same null space).
+    widths : ndarray (p,)
+        Prior box widths hi − lo in φ.
+    """
+    d = np.asarray(widths, float)
+    scaled = d[:, None] * info * d[None, :]
+    w, u = np.linalg.eigh(0.5 * (scaled + scaled.T))
+    null = u[:, w <= UNSEEN_RTOL * max(float(w.max()), 0.0)]
+    if null.shape[1] == 0:
+        return cov
+    v = d[:, None] * null  # the null directions in φ, each of prior variance 1/12 in the scaled frame
+    return cov + (v @ v.T) / 12.0
+
+
 def sandwich(J: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """B⁻¹ Ω B⁻¹ with B = JᵀJ (pseudo-inverse) [φ²]."""
     bread = np.linalg.pinv(J.T @ J)

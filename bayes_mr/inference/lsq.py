@@ -410,12 +410,14 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     else:
         cov, lag = hac_covariance(J, r, n_c)
     cov, eiv = _with_input_noise(lik, phi, J, sigma, cov, replicas)
-    log_prior = -float(np.sum(np.log(lik.phi_hi - lik.phi_lo))) + occam
+    widths = lik.phi_hi - lik.phi_lo
+    cov, cov_iid = (calibrate.prior_on_unseen(c, JtJ, widths) for c in (cov, cov_iid))
+    log_prior = -float(np.sum(np.log(widths))) + occam
     if sampled:
         # log-uniform σ prior, and the Gaussian integral over ln σ_c (curvature 2 N_c at the optimum)
         log_prior += -float(np.sum(lik.log_sigma_hi - lik.log_sigma_lo)) + 0.5 * sigma.size * math.log(2 * math.pi)
     terms = evidence_scale.LaplaceTerms(
-        loglik, log_prior, *evidence_scale.volume_terms(JtJ, lik.phi_hi - lik.phi_lo),
+        loglik, log_prior, *evidence_scale.volume_terms(JtJ, widths),
         n_coef=int(sum(lik.residual.orders)) if ar else 0,
         sigma_counts=np.asarray(n_terms, float) if sampled else None, trace_hc=evidence_scale.trace_hc(JtJ, cov))
     log_z = terms.log_evidence(1.0)

@@ -226,6 +226,30 @@ def test_laplace_evidence_gives_an_unidentified_parameter_nothing():
     assert vol == pytest.approx(0.5 * np.log(2 * np.pi / 1e6) + np.log(3.0))
 
 
+def test_unseen_parameter_is_reported_with_the_priors_spread_not_as_known():
+    """The same record: the voltage parameters' sd is the uniform prior's (width/√12 in φ), not the zero a
+    pseudo-inverse gives a direction without information; the seen parameters keep the base model's sd."""
+    from bayes_mr.inference.calibrate import prior_on_unseen
+    from bayes_mr.inference.lsq import LSQSettings, fit_lsq
+    from bayes_mr.likelihood import OutputError
+    from records import offset_device_record
+
+    rec = offset_device_record(1.0, offset=0.0)
+    lik = OutputError("dahl+voltage_dependence", rec)
+    ext = fit_lsq(lik, LSQSettings(seed=0))
+    base = fit_lsq(OutputError("dahl", rec), LSQSettings(seed=0))
+    width = lik.phi_hi - lik.phi_lo
+    sd_phi = np.sqrt(np.diag(ext.cov_phi))
+    for name in ("a_v", "c_v", "eta"):
+        j = lik.par.names.index(name)
+        assert sd_phi[j] == pytest.approx(width[j] / np.sqrt(12.0), rel=1e-6)
+    for name in ("c", "k", "F_d", "sigma"):
+        assert ext.sd_theta[name] == pytest.approx(base.sd_theta[name], rel=0.05)
+    # a full-rank information leaves a covariance exactly as it was
+    cov = np.array([[2.0, 0.3], [0.3, 1.0]])
+    assert np.array_equal(prior_on_unseen(cov, np.linalg.inv(cov), np.array([5.0, 5.0])), cov)
+
+
 # --- long records: starts raced on the head, with a sub-step cost cap ------------------------------------------
 
 def _forced_bouc_wen(truth: dict, seed: int, fs: float = 500.0, duration: float = 2.0):
