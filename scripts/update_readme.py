@@ -14,7 +14,7 @@ control) and writes the section between ``<!-- run:start -->`` and
 the packaged record (``--quick``, another budget or record) unless ``--force``.
 ``bench`` writes the section between ``<!-- bench:start -->`` and
 ``<!-- bench:end -->`` from the benchmark's JSON. ``study NAME`` copies a
-full (not ``--quick``) study's ``report.md`` (its title dropped, its figures
+study's ``report.md``, full or ``--quick`` as the README's text says, (its title dropped, its figures
 copied into ``figures/`` as ``NAME_FILE.png``) between ``<!-- NAME:start -->``
 and ``<!-- NAME:end -->``. The text of each section is
 built by :mod:`bayes_mr.report.readme`; the rest of the README is left alone.
