@@ -96,11 +96,13 @@ def bench_section(r: dict) -> str:
     ]
     rows += _kernel_rows(r)
     if "boucwen_lsq_s" in r:
-        rows += [(f"least squares, bouc-wen, {r['boucwen_record']} (estimate within "
-                  f"{r['boucwen_lsq_max_z']:.1f} sd of the true values)", f"{r['boucwen_lsq_s']:.0f} s"),
-                 (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, within "
-                  f"{r['boucwen_mcmc_max_z']:.1f} sd{'' if r['boucwen_mcmc_converged'] else ' (NOT converged)'}",
-                  f"{r['boucwen_mcmc_s']:.0f} s")]
+        verdict = ("converged" if r["boucwen_mcmc_converged"] else
+                   f"NOT converged: stopped on {r.get('boucwen_mcmc_stopped', 'its budget')}")
+        rows += [(f"least squares, bouc-wen, {r['boucwen_record']}, {r['boucwen_input_interp']} inputs "
+                  f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)", f"{r['boucwen_lsq_s']:.0f} s"),
+                 (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, τ_max "
+                  f"{r['boucwen_mcmc_tau_max']:.0f}, R-hat_max {r['boucwen_mcmc_rhat_max']:.3f}, mean within "
+                  f"{r['boucwen_mcmc_max_z']:.2g} sd ({verdict})", f"{r['boucwen_mcmc_s']:.0f} s")]
     if "compare_s" in r:
         where = f"{r['compare_workers']} workers" if r["compare_workers"] else "in process"
         rows.append((f"compare, {r['compare_record']}, TI evidence ({where}; selected {r['compare_selected']})",
