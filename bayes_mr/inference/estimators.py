@@ -174,7 +174,9 @@ class UKF:
         every channel; 3 × 2 priors): without the floor 31 of 48 true values
         inside the 90 % interval (σ at z up to 5.6, the filter's SDs 2–3×
         below least squares' while its estimate sat at the likelihood's peak),
-        least squares 44 of 48.
+        43 of 48 with the floor, least squares 44 of 48 (a second family of
+        12: 45 and 43 of 48; ``tests/inference/test_coverage.py`` checks the
+        coverage study's device family).
     """
 
     settings: UKFSettings = field(default_factory=UKFSettings)
@@ -221,7 +223,7 @@ class UKF:
             cov = cov + np.outer(delta, delta)
             if likelihood.kind == "device" and calibrate.input_noise_sd(likelihood):
                 # a device test feeds its measured (noisy) motion straight into the force: the filter tracks no
-                # state that could absorb that noise, so its covariance misses it (UKF.input_floor)
+                # state that could absorb that noise, so its covariance misses it (class docstring, peak_nfev)
                 floor = laplace(likelihood, peak["phi"]).cov_phi
                 cov = calibrate.loewner_max(cov, floor)
                 uncertainty["covariance"] += ", floored at least squares' calibrated covariance there"
