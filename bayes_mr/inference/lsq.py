@@ -390,11 +390,8 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     ar = lik.residual.kind == "ar"
     if ar:
         lik.choose_residual_orders(phi)
-    if sampled:
-        # σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
-        sigma = _ml_sd(lik, yhat[0])
-    else:
-        sigma = np.asarray(lik.noise_sd, float)
+    # sampled: σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
+    sigma = _ml_sd(lik, yhat[0]) if sampled else np.asarray(lik.noise_sd, float)
     rf = _Residuals(lik, sigma)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
