@@ -57,9 +57,9 @@ CENTRES = {
     "lugre": {"c": 100.0, "k": 2.0e4, "beta": 6.0e4, "epsilon": 20.0, "alpha": 2400.0},
     "normalized-bouc-wen": {"c": 100.0, "k": 2.0e4, "k_z": 24.5, "rho": 2500.0, "n": 1.05, "sigma": 1.0},
 }
-#: Log-normal spread of the truths about the centres.
 #: Centres of the device-test family: a Dahl damper alone (forces of ~100 N at the test's velocities).
 DEVICE_CENTRES = {"dahl": {"c": 300.0, "k": 300.0, "F_d": 40.0, "sigma": 3000.0}}
+#: Log-normal spread of the truths about the centres.
 TRUTH_SPREAD = 0.2
 NOISE_RANGE = (0.01, 0.05)
 SIGNALS = ("elcentro", "blwn", "freq-sweep-up-down")
@@ -112,8 +112,8 @@ def family(form: str, n: int, seed: int = 0, kind: str = "structure") -> list[di
                              source=f"coverage {kind} {form} {i}")
             if inside_prior(form, rec, truth):
                 break
-        out.append({"form": form, "kind": kind, "member": i, "truth": truth, "record": rec, "signal": sig_name, "noise": noise,
-                    "draws": attempt + 1})
+        out.append({"form": form, "kind": kind, "member": i, "truth": truth, "record": rec, "signal": sig_name,
+                    "noise": noise, "draws": attempt + 1})
     return out
 
 
@@ -154,8 +154,8 @@ def score(member: dict, engine: str, estimator, residual: str, seed: int = 0) ->
     rows = []
     for j, name in enumerate(lik.par.names):
         t = member["truth"][name]
-        rows.append({"kind": member.get("kind", "structure"), "form": member["form"], "member": member["member"], "signal": member["signal"],
-                     "noise": member["noise"], "engine": engine, "residual": residual, "param": name,
+        rows.append({"kind": member.get("kind", "structure"), "form": member["form"], "member": member["member"],
+                     "signal": member["signal"], "noise": member["noise"], "engine": engine, "residual": residual, "param": name,
                      "truth": t, "mean": mean[j], "sd": sd[j], "lo": lo[j], "hi": hi[j],
                      "inside": bool(lo[j] <= t <= hi[j]),
                      "z": (t - mean[j]) / sd[j] if np.isfinite(sd[j]) and sd[j] > 0 else np.nan,
