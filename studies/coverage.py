@@ -154,7 +154,7 @@ def score(member: dict, engine: str, estimator, residual: str, seed: int = 0) ->
     rows = []
     for j, name in enumerate(lik.par.names):
         t = member["truth"][name]
-        rows.append({"kind": member.get("kind", "structure"), "form": member["form"], "member": member["member"],
+        rows.append({"kind": member["kind"], "form": member["form"], "member": member["member"],
                      "signal": member["signal"], "noise": member["noise"], "engine": engine, "residual": residual, "param": name,
                      "truth": t, "mean": mean[j], "sd": sd[j], "lo": lo[j], "hi": hi[j],
                      "inside": bool(lo[j] <= t <= hi[j]),

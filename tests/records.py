@@ -216,3 +216,15 @@ def naming_failures(out: dict, effect: str, threshold: float, *, top_first: bool
     if top_first:
         checks[f"top candidate is not {effect} ({causes[:2]})"] = bool(causes) and causes[0][0] == effect
     return [msg for msg, ok in checks.items() if not ok]
+
+
+def coverage_study():
+    """``studies/coverage.py`` as a module (its families of simulated records; a study, not a package module)."""
+    import importlib.util
+
+    from bayes_mr.cli import studies_dir
+
+    spec = importlib.util.spec_from_file_location("coverage_study", studies_dir() / "coverage.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

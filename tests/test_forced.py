@@ -93,6 +93,7 @@ def test_forced_known_mass_is_not_estimated(displacement_only):
 STRUCTURE_DAHL = {"c": 200.0, "k": 3.0e4, "F_d": 40.0, "sigma": 1500.0}
 
 
+@pytest.fixture(scope="module")
 def structure_acceleration_only():
     from records import blwn_ground
 
@@ -102,8 +103,8 @@ def structure_acceleration_only():
                       noise=0.01, seed=5, outputs=("acceleration",))
 
 
-def test_structure_acceleration_only_lsq():
-    rec = structure_acceleration_only()
+def test_structure_acceleration_only_lsq(structure_acceleration_only):
+    rec = structure_acceleration_only
     assert "displacement" not in rec
     s = assert_recovered(Identify("dahl", LeastSquares()).fit(rec, progress=False), STRUCTURE_DAHL)
     assert s["mse_channels"] == ["acceleration"]
@@ -111,7 +112,8 @@ def test_structure_acceleration_only_lsq():
 
 @pytest.mark.parametrize("case", ["forced, displacement only", "forced, acceleration only",
                                   "structure, acceleration only"])
-def test_partial_outputs_ukf_and_mcmc_recover_within_3_sd(case, displacement_only, acceleration_only):
+def test_partial_outputs_ukf_and_mcmc_recover_within_3_sd(case, displacement_only, acceleration_only,
+                                                           structure_acceleration_only):
     """The two other engines on the three partial-output records: every parameter within 3 of its own sd.
 
     The UKF from a short training (3 × 2 priors; its sd is the filter's plus the step to the likelihood's
@@ -120,7 +122,7 @@ def test_partial_outputs_ukf_and_mcmc_recover_within_3_sd(case, displacement_onl
     """
     rec, truth = {"forced, displacement only": (displacement_only, DAHL_FORCED),
                   "forced, acceleration only": (acceleration_only, DAHL_FORCED),
-                  "structure, acceleration only": (structure_acceleration_only(), STRUCTURE_DAHL)}[case]
+                  "structure, acceleration only": (structure_acceleration_only, STRUCTURE_DAHL)}[case]
     channel = "displacement" if "displacement" in case else "acceleration"
     short = MCMCSettings(seed=0, progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)
     for engine in (UKF(n_lhs=3, taus=(0.1, 0.5)), Emcee(settings=short, evidence="laplace")):

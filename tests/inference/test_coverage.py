@@ -4,23 +4,15 @@ The families are the coverage study's (``studies/coverage.py``): simulated struc
 RMS noise on the measured input and on the outputs, truths drawn around the thesis's values.
 """
 
-import importlib.util
 
 import numpy as np
 import pytest
 
-from bayes_mr.cli import studies_dir
 from bayes_mr.inference.calibrate import adjust_draws, input_noise_sd, loewner_max
 from bayes_mr.inference.estimators import UKF, LeastSquares
 from bayes_mr.inference.lsq import LSQSettings
 from bayes_mr.likelihood import OutputError
-
-
-def _study():
-    spec = importlib.util.spec_from_file_location("coverage_study", studies_dir() / "coverage.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from records import coverage_study
 
 
 def test_least_squares_intervals_hold_the_truth_under_input_noise():
@@ -32,7 +24,7 @@ def test_least_squares_intervals_hold_the_truth_under_input_noise():
     not stricter. Measured: 18/20 (worst |z| 1.9) with the input-noise sandwich, 13/20 (worst |z| 4.4)
     with the HAC covariance alone (``input_noise_replicas=0``) on the same fits; ~13 s of CPU.
     """
-    study = _study()
+    study = coverage_study()
     members = study.family("dahl", 5, seed=100)
     rows, failed = study.run(members, {"lsq": LeastSquares()}, residuals=("iid",), say=lambda msg: None)
     assert not failed
@@ -45,7 +37,7 @@ def test_ukf_intervals_hold_the_truth_on_device_tests():
     inside its 90 % interval (a calibrated engine fails this with ~3 % probability). Measured: 22/24, worst |z|
     3.0 with the device-test floor at least squares' calibrated covariance; 14/24, worst |z| 6.2 with the
     filter's covariance and its peak offset alone (the noisy measured motion reaches the force directly)."""
-    study = _study()
+    study = coverage_study()
     members = study.family("dahl", 6, seed=100, kind="device")
     rows, failed = study.run(members, {"ukf": UKF(n_lhs=3, taus=(0.1, 0.5))}, residuals=("iid",),
                              say=lambda msg: None)
@@ -58,7 +50,7 @@ def test_the_input_noise_widens_least_squares_where_the_hac_middle_misses_it():
     """On one record with 3 % input noise the calibrated SDs are at least the HAC ones, and wider for some."""
     from bayes_mr.inference.lsq import fit_lsq
 
-    member = _study().family("dahl", 1, seed=7)[0]
+    member = coverage_study().family("dahl", 1, seed=7)[0]
     lik = OutputError("dahl", member["record"])
     assert input_noise_sd(lik)  # the record declares its input's noise
     cal = fit_lsq(lik, LSQSettings())
@@ -123,7 +115,7 @@ def test_loewner_max_with_a_singular_side_stays_finite():
 def test_every_engine_covers_80_to_97_percent():
     """The full coverage study (6 truths per form × 3 forms, lsq/emcee under iid and AR, the UKF): every
     engine × residual model holds the truth inside its 90 % interval 80–97 % of the time. ~1 h on 2 cores."""
-    study = _study()
+    study = coverage_study()
     members = [m for form in study.CENTRES for m in study.family(form, study.PER_FORM, seed=0)]
     rows, failed = study.run(members, study.estimators(quick=False), say=lambda msg: None)
     table = study.coverage_table(rows)

@@ -18,6 +18,7 @@ from bayes_mr.likelihood import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
 from bayes_mr.simulate import synthesize
+from records import coverage_study
 
 TRUTH = {"c": 100.0, "k": 2.0e4, "F_d": 25.0, "sigma": 2500.0}
 
@@ -70,12 +71,14 @@ def test_ukf_interval_reaches_the_peak(lik):
 
 
 def _device_record(i: int):
-    """A dahl device test with 1–5 % noise on displacement, velocity and force (truth ±20 % about a centre)."""
+    """A dahl device test of the coverage study's device family's kind (its centres, spread, noise range and
+    frequency sweep) drawn from the seed sequence (7, i): 1–5 % noise on displacement, velocity and force."""
+    study = coverage_study()
     rng = np.random.default_rng([7, i])
-    centre = {"c": 300.0, "k": 300.0, "F_d": 40.0, "sigma": 3000.0}
-    truth = {k: v * float(np.exp(0.2 * rng.standard_normal())) for k, v in centre.items()}
-    noise = float(rng.uniform(0.01, 0.05))
-    sig = make_signal("freq-sweep-up-down", duration=6.0, fs=250.0, amplitude=5e-3, fmax=5.0)
+    truth = {k: v * float(np.exp(study.TRUTH_SPREAD * rng.standard_normal()))
+             for k, v in study.DEVICE_CENTRES["dahl"].items()}
+    noise = float(rng.uniform(*study.NOISE_RANGE))
+    sig = study.signal("freq-sweep-up-down", 0, "device")
     model = get_model("dahl")
     rec = synthesize(model, model.theta("device", truth), sig.time, sig.as_input("device"), noise=noise,
                      seed=int(rng.integers(2**31)), source=f"device {i}")
