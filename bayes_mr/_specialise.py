@@ -12,7 +12,7 @@ becomes a compile-time constant there, and LLVM folds away the branches of
 the effects the model does not have. The physics stays in one place: a new
 effect added to the generic kernel is specialised with no change here.
 
-Compiling one takes one to three minutes, so ``auto`` never waits for it:
+Compiling one takes about a minute (50–110 s measured), so ``auto`` never waits for it:
 it starts the compile in a child process (:mod:`bayes_mr._compile_worker`)
 and runs the generic kernel until the child marks the machine code ready
 on disk (:class:`_Auto`).
@@ -55,15 +55,20 @@ CACHE_ENV = "BAYES_MR_CACHE"
 KERNELS_ENV = "BAYES_MR_KERNELS"
 #: ``auto``: a background compile of a layout's specialised kernel starts once this many sample-steps
 #: (samples × parameter sets) have been asked of it in the process; a kernel already compiled on disk
-#: for the call's argument types runs at once. A cold compile costs one to three minutes of one core
-#: per model and kernel (lugre device: 170 s) and saves ~270 ns per dahl sample-step (356 → 88 ns): it
-#: pays after ~2e8 steps — an emcee posterior or a 100-prior UKF training, not a least-squares fit or
-#: one of diagnose's dozens of candidate refits (on 2 cores the compile takes a core from them).
+#: for the call's argument types runs at once. A cold compile costs about a minute of one core per model
+#: and kernel (the simulator, structure test: dahl 53 s, normalized-bouc-wen 107 s; before RK4's four
+#: stages shared one inlined right-hand side, 1–3.5 min) and saves ~110 ns per dahl sample-step (182 → 76
+#: ns). It pays back within one process after ~5e8 steps (a minute / 110 ns) and at once in every later
+#: process (the disk cache), so it starts at 2e8 steps asked of one layout — an emcee posterior or a
+#: 100-prior UKF training, not a least-squares fit or one of diagnose's dozens of candidate refits (on 2
+#: cores the compile takes a core from them).
 AUTO_WORK = 2e8
 
 #: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics).
 #: The constant layout alone (nothing inlined) measured 1.3x on the dahl structure step; inlining these
-#: too, 2-4x (dahl 356 -> 88 ns per sample), at about a minute of compilation per model and kernel.
+#: too, 1.5-2.4x in all (dahl 182 -> 76 ns per sample; bench ``simulate_ns_per_step``). ``advance`` calls
+#: ``deriv`` from one site for all four RK4 stages, so it is inlined once, not four times: the same speed
+#: at a fifth of the compile time (dahl structure simulator, measured: ~220 s -> 47 s).
 INLINE = ("deriv", "rate", "substeps", "advance", "observe")
 
 _loaded: dict[tuple, object] = {}
@@ -306,7 +311,7 @@ class _Auto:
     (loading it costs milliseconds), else the generic kernel — and, once the
     work asked of this layout has passed :data:`AUTO_WORK`, it starts a
     background compile, so a long job speeds up part-way instead of stopping
-    for the one to three minutes a compile takes. ``eager`` (the
+    for the minute or so a compile takes. ``eager`` (the
     ``specialised`` choice) compiles in this process instead, and marks the
     result ready for later ``auto`` calls.
     """

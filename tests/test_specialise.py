@@ -171,7 +171,7 @@ def test_ukf_outputs_match(cache, monkeypatch):
     from bayes_mr.likelihood import OutputError
     from records import structure_record
 
-    rec = structure_record("dahl", {}, n=1500)
+    rec, _ = structure_record("dahl", {}, n=1500)
     problem = ukf.make_problem(OutputError("dahl", rec))
     priors = ukf.lhs_priors(problem.coords, seed=0)[:4]
     out = {}

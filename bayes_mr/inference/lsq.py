@@ -19,11 +19,9 @@
    estimate, its covariance and evidence are still the whole record's.
    While racing, simulations get at most ``search_substeps`` RK4
    sub-steps per sample interval, and a candidate or start whose simulation
-   saturates that cap on more than :data:`STIFF_FRACTION` of the intervals is
-   rejected as a start (its dynamics are far faster than the sampling
-   resolves; simulating it with the kernel's 400 sub-steps costs 30–90 s per
-   evaluation on the Bouc–Wen benchmark). Only the final refinement
-   simulates with the kernel's full sub-step range.
+   saturates that cap on more than :data:`STIFF_FRACTION` of the intervals is rejected as a start (its dynamics
+   are far faster than the sampling resolves; simulating it with the kernel's 400 sub-steps costs 30–90 s per
+   evaluation on the Bouc–Wen benchmark). Only the final refinement simulates with the full sub-step range.
 3. **Laplace approximation** at the optimum: Cov(φ) = (JᵀJ)⁻¹ with J the
    Jacobian of the σ̂-standardised residuals (central differences on a
    replayed sub-step schedule). Residuals of a dynamic model are
@@ -163,8 +161,6 @@ class LSQResult:
     evidence_terms: evidence_scale.LaplaceTerms | None = None
 
 
-# --- covariance -------------------------------------------------------------------------
-
 # --- nonlinear least squares -----------------------------------------------------------
 
 
@@ -188,21 +184,26 @@ class _Residuals:
         self.schedule = None
         self.options = {} if cap is None else {"n_max": int(cap)}
         self.cap = cap
+        self.last = None  # (φ, residual) of the last evaluation that simulated: the Jacobian's base point
 
     def __call__(self, phi):
         yhat, sim = self.lik.predict(phi, **self.options)
         self.schedule = sim.schedule[0]
         r = _standardised(self.lik, yhat[0], self.sd)
+        self.last = None
         if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
             # a diverged (or, while searching, too stiff) simulation is a very bad fit, not a crash
             worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
             return np.full(r.size, worst)
+        self.last = (np.array(phi, float), r.ravel())
         return r.ravel()
 
     def jacobian(self, phi, central: bool = False):
         p = phi.size
         h = 1e-6 * np.maximum(1.0, np.abs(phi))
-        batch = [phi]
+        # trust-region asks for J(φ) right after r(φ): the base point is not simulated again (same numbers)
+        known = not central and self.last is not None and np.array_equal(self.last[0], phi)
+        batch = [] if known else [phi]
         for j in range(p):
             e = np.zeros(p)
             e[j] = h[j]
@@ -212,7 +213,7 @@ class _Residuals:
         if self.schedule is None:
             self(phi)
         yhat, _ = self.lik.predict(np.array(batch), schedule=self.schedule)
-        r = [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
+        r = [self.last[1]] * known + [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
         # a perturbed simulation that diverges says nothing about the slope: treat it as flat
         r = [ri if np.all(np.isfinite(ri)) else r[0] for ri in r]
         if not np.all(np.isfinite(r[0])):

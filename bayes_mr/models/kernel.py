@@ -385,36 +385,42 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
 
     ``k1`` must hold f(s, a0) on entry (it is reused for the first sub-step).
     ``work`` is scratch of shape (5, ns + 3). Inputs are linear in time.
+    The four stages run in one loop with one call of :func:`deriv`, so a
+    compiler that inlines it does so once, not four times.
     """
     ns = lay[L_NS]
-    k2 = work[0]
-    k3 = work[1]
-    k4 = work[2]
     tmp = work[3]
     am = work[4]
     hs = h / n_sub
     for j in range(n_sub):
         tj = t + j * hs
-        if j > 0:
-            f = j / n_sub
+        for st in range(4):
+            if st == 0 and j == 0:
+                continue  # k1 = f(s, a0) was handed in
+            # stage st: the state s + c·hs·k_{st-1} at the time tj + c·hs, c = 0, ½, ½, 1
+            if st == 0:
+                c = 0.0
+                f = j / n_sub
+            elif st == 3:
+                c = 1.0
+                f = (j + 1.0) / n_sub
+            else:
+                c = 0.5
+                f = (j + 0.5) / n_sub
             for q in range(3):
                 am[q] = a0[q] + f * (a1[q] - a0[q])
-            deriv(lay, cst, p, tj, am, s, k1)
-        f = (j + 0.5) / n_sub
-        for q in range(3):
-            am[q] = a0[q] + f * (a1[q] - a0[q])
-        for q in range(ns):
-            tmp[q] = s[q] + 0.5 * hs * k1[q]
-        deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k2)
-        for q in range(ns):
-            tmp[q] = s[q] + 0.5 * hs * k2[q]
-        deriv(lay, cst, p, tj + 0.5 * hs, am, tmp, k3)
-        f = (j + 1.0) / n_sub
-        for q in range(3):
-            am[q] = a0[q] + f * (a1[q] - a0[q])
-        for q in range(ns):
-            tmp[q] = s[q] + hs * k3[q]
-        deriv(lay, cst, p, tj + hs, am, tmp, k4)
+            if st == 0:
+                for q in range(ns):
+                    tmp[q] = s[q]
+            else:
+                kp = k1 if st == 1 else work[st - 2]
+                for q in range(ns):
+                    tmp[q] = s[q] + c * hs * kp[q]
+            kn = k1 if st == 0 else work[st - 1]
+            deriv(lay, cst, p, tj + c * hs, am, tmp, kn)
+        k2 = work[0]
+        k3 = work[1]
+        k4 = work[2]
         for q in range(ns):
             s[q] += hs / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
         if lay[L_FD] >= 0:
