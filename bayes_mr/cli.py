@@ -167,6 +167,11 @@ def cmd_fit(args) -> int:
             raise CLIError("--validate chooses among trained UKF runs (thesis method 2): use it with --engine ukf, "
                            "or score a fit on another record with `bayes-mr validate RESULT.nc DATA2`")
         options["validate_on"] = _read(args.validate, args)
+    if args.evidence is not None:
+        if args.engine != "mcmc":
+            raise CLIError(f"--evidence {args.evidence} is the route of the mcmc engine's evidence: use it with "
+                           "--engine mcmc (least squares' evidence is Laplace, the UKF's is not an evidence)")
+        options["evidence"] = args.evidence
     if (args.scheduler or args.workers is not None) and args.engine != "ukf":
         raise CLIError("--scheduler/--workers spread UKF training runs: use them with --engine ukf (or compare)")
     with _executor(args) as ex:
@@ -193,14 +198,18 @@ def cmd_validate(args) -> int:
 
 def cmd_compare(args) -> int:
     from .comparison import compare, table
-    from .identify import UKF
+    from .identify import UKF, Emcee
     from .report.markdown import markdown_table
 
     rec = _read(args.data, args)
     other = _read(args.validate, args) if args.validate else None
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
-    estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else None
+    estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else {}
+    if args.evidence is not None:
+        if "mcmc" not in engines:
+            raise CLIError(f"--evidence {args.evidence} is the route of the mcmc rows' evidence: add mcmc to --engines")
+        estimators["mcmc"] = Emcee(evidence=args.evidence)
     with _executor(args) as ex:
         out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
                       progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,

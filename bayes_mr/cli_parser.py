@@ -51,6 +51,14 @@ def _executor_flags(p: argparse.ArgumentParser, what: str) -> None:
     g.add_argument("--workers", type=int, metavar="N", help=f"run {what} on a local cluster of N processes, closed after")
 
 
+def _evidence_flag(p: argparse.ArgumentParser, where: str) -> None:
+    """``--evidence ti|laplace|tmcmc``: the evidence route of the mcmc engine (``where``: which fits)."""
+    p.add_argument("--evidence", choices=("ti", "laplace", "tmcmc"), default=None,
+                   help=f"evidence route of {where}: thermodynamic integration with stepping-stone and Laplace "
+                        "beside it (ti, default), Laplace alone (laplace, no ladder: fast), or transitional MCMC "
+                        "from the posterior's reference (tmcmc, Laplace beside it; see bayes_mr/inference/tmcmc.py)")
+
+
 def _no_readme_flag(p: argparse.ArgumentParser) -> None:
     # kept so scripts and Makefiles written for earlier versions still run: the command never writes README.md
     p.add_argument("--no-readme", action="store_true",
@@ -102,6 +110,7 @@ def _fit_parsers(sub, forms: str) -> None:
     p.add_argument("--prior", action="append", metavar="NAME=LO:HI", help="plausible range of a parameter [SI]")
     p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="hold a parameter fixed [SI]")
     p.add_argument("-o", "--output", metavar="RESULT.nc", help="write the full result")
+    _evidence_flag(p, "--engine mcmc")
     _executor_flags(p, "the UKF's training runs (--engine ukf)")
     _job_flags(p, out=None, json=("SUMMARY.json", "write the summary here (default: stdout)"))
 
@@ -131,6 +140,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("--force", action="store_true",
                    help="select even if the evidence's chains (a TI rung, the posterior) did not converge; "
                         "the JSON then says forced (default: refuse and name the failed rungs)")
+    _evidence_flag(p, "the mcmc rows")
     _executor_flags(p, "the models × engines fits")
     _job_flags(p, out="also write every fit as netCDF and the table as CSV here",
                json=("OUT.json", "write the comparison here (default: stdout)"))

@@ -77,6 +77,26 @@ def test_device_fit_reports_force_nrmse(tmp_path, device_csv):
     assert fit["params"]["f0"] == pytest.approx(-100, rel=0.05)
 
 
+def test_fit_takes_the_mcmc_evidence_route_from_the_command_line(tmp_path, monkeypatch):
+    """``--evidence laplace``: the chain's fit reports the Laplace route and no ladder ran (its rungs would be in
+    ``evidence_routes`` as ti/ss). The chain is cut at 250 steps: the route is the point, not the posterior."""
+    from functools import partial
+
+    from bayes_mr.inference import mcmc
+
+    monkeypatch.setattr(mcmc, "MCMCSettings", partial(mcmc.MCMCSettings, max_steps=250))
+    path = tmp_path / "short.csv"
+    assert main(["simulate", "--model", "dahl", "--signal", "blwn", "--amplitude", "0.004", "--fmax", "10",
+                 "--duration", "3", "--fs", "250", "--mass", "50", "--noise", "0.01", "--seed", "4",
+                 "-o", str(path)]) == 0
+    out = tmp_path / "mcmc.json"
+    assert main(["fit", str(path), "--mass", "50", "--model", "dahl", "--engine", "mcmc", "--evidence", "laplace",
+                 "--json", str(out), "--quiet"]) == 0
+    fit = json.loads(out.read_text())
+    assert fit["engine"] == "mcmc" and fit["evidence_route"] == "laplace"
+    assert set(fit["evidence_routes"]) == {"laplace"} and fit["n_steps"] == 250
+
+
 @pytest.mark.parametrize("argv,needle", [
     (["fit", "{missing}", "--model", "dahl"], "file not found"),
     (["fit", "{structure}", "--model", "dahl"], "mass"),
@@ -84,6 +104,7 @@ def test_device_fit_reports_force_nrmse(tmp_path, device_csv):
     (["fit", "{structure}", "--mass", "50", "--model", "dahl", "--prior", "sigma=1"], "LO:HI"),
     (["simulate", "--model", "dahl", "--param", "Fd=3", "--signal", "blwn", "--kind", "device"], "unknown parameter"),
     (["simulate", "--model", "dahl", "--signal", "blwn", "--mass", "50", "--duration", "0.05"], "samples"),
+    (["fit", "{structure}", "--mass", "50", "--model", "dahl", "--engine", "lsq", "--evidence", "tmcmc"], "mcmc"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, structure_csv, capsys, argv, needle):
     out = tmp_path / "out.json"
