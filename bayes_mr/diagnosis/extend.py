@@ -145,7 +145,7 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         NRMSE after it), ``unexplained_b`` (what the extended model leaves on
         B: residual over noise floor, by command state, band, …),
         ``wall_s``, and ``_fit``, the extended :class:`~.fits.Fit` (for
-        :func:`at_rate`; private, left out of JSON summaries).
+        a caller that goes on with it; private, left out of JSON summaries).
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
@@ -192,32 +192,3 @@ def _summary(fit: Fit, part_a: xr.Dataset, part_b: xr.Dataset) -> dict:
     return {"model": fit.name, "force_nrmse_a": part_nrmse(fit, part_a), "force_nrmse_b": part_nrmse(fit, part_b),
             "force_nrmse_b_chain": part_nrmse(fit, part_b, chain=True),
             "log_evidence": _num(fit.result.log_evidence), "params": fit.params()}
-
-
-def at_rate(fit: Fit, part_a: xr.Dataset, part_b: xr.Dataset, *, progress=None) -> dict:
-    """``fit``'s model refitted from its optimum on parts A/B prepared at another (higher) rate, scored on B.
-
-    A record decimated for the search (250 Hz on the NEES damper) loses the
-    force's sharp transitions above its anti-alias cut-off and smears each
-    command switch over a sample; at ≥ 1 kHz the inputs keep them. The
-    search (:func:`extend`) stays cheap at the low rate and only the final
-    model is refitted here: on NEES spencer + its five effects, part-B NRMSE
-    0.1335 at 250 Hz, 0.1222 as fitted evaluated at 1 kHz, 0.1169 refitted
-    at 1 kHz (393 s from the 250-Hz optimum under a load of ~25, measured).
-
-    Returns
-    -------
-    dict
-        ``fs`` [Hz], ``model``, ``force_nrmse_a``, ``force_nrmse_b`` (sample for
-        sample at that rate), ``force_nrmse_b_before`` (the model as fitted at
-        the lower rate, evaluated on this B), ``params``, ``wall_s``.
-    """
-    t0 = _time.perf_counter()
-    say = progress_say(progress)
-    before = part_nrmse(fit, part_b)
-    hi = fit_at(part_a, fit.model, fit.params())
-    out = {"fs": float(part_a.attrs["fs"]), "model": hi.name, "force_nrmse_a": part_nrmse(hi, part_a),
-           "force_nrmse_b": part_nrmse(hi, part_b), "force_nrmse_b_before": before, "params": hi.params(),
-           "wall_s": round(_time.perf_counter() - t0, 2)}
-    say(f"{hi.name} at {out['fs']:.0f} Hz: part B NRMSE {before:.4f} as fitted, {out['force_nrmse_b']:.4f} refitted")
-    return out
