@@ -41,6 +41,16 @@ def test_virtual_shake_table_quick(tmp_path):
     assert (out / "shake_table.csv").read_text().startswith("model,engine")
 
 
+def test_damper_extension_quick(tmp_path):
+    """The extension study end to end on a short window: every step scored on part B, the final model in bold."""
+    out, summary = run_study("damper-extension", tmp_path, "--quick")
+    ext = summary["extension"]
+    assert ext["steps"] and all(s["force_nrmse_b"] is None or s["force_nrmse_b"] > 0 for s in ext["steps"])
+    assert 0 < ext["extended"]["force_nrmse_b"] < 1
+    report = (out / "report.md").read_text()
+    assert f"| **{ext['extended']['model']}** |" in report and (out / "extension_part_b.png").exists()
+
+
 @pytest.mark.slow
 def test_chapter5_real_record_full(tmp_path):
     """Chapter 5's procedure on the measured damper: every form, validated on the part never fitted."""
