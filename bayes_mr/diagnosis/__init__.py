@@ -30,6 +30,7 @@ from pathlib import Path
 
 import xarray as xr
 
+from ..inference.evidence_scale import common_scale
 from ..inference.lsq import LSQSettings
 from ..models import NONE, Model, get_model
 from ..progress import say as progress_say
@@ -135,8 +136,9 @@ def diagnose(
     dict
         The SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
         ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``),
-        ``extended`` {model, mse, log_evidence}, ``gain`` {mse_ratio, delta_log_evidence, validation_mse_ratio} — and ``effects`` (all effects named, in the
-        order they were added), ``selection`` (each forward-selection round),
+        ``extended`` {model, mse, log_evidence}, ``gain`` {mse_ratio, delta_log_evidence, validation_mse_ratio; also
+        ``delta_log_evidence_calibrated`` at the pooled ``evidence_scale``, :func:`_calibrated_gain`} — and
+        ``effects`` (all effects named, in the order they were added), ``selection`` (each forward-selection round),
         ``masked``, ``threshold``, ``residuals`` (before/after summaries),
         ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``;
         ``unexplained``, ``unexplained_ratio``, ``at_noise_floor``, ``verdict``
@@ -230,11 +232,28 @@ def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], 
         "gain": {
             "mse_ratio": _num(ext.mse / base.mse),
             "delta_log_evidence": _num(ext.result.log_evidence - base.result.log_evidence),
+            **_calibrated_gain(base, ext),
             "delta_score": _num(sum(c.score for c in selected)) if selected else 0.0,
             "validation_mse_ratio": validation["mse_ratio"] if validation else None,
         },
         "validation": validation,
     }
+
+
+def _calibrated_gain(base: Fit, ext: Fit) -> dict:
+    """``evidence_scale`` k̄ and ``delta_log_evidence_calibrated``: ln Z_k̄(extended) − ln Z_k̄(baseline).
+
+    The Laplace evidences of the two fits' likelihood raised to their pooled k̄ (as ``compare``'s calibrated
+    Bayes factors, :func:`~bayes_mr.inference.evidence_scale.common_scale`): the raw difference counts every
+    sample as independent and grows with the sampling rate, this one counts what the record holds. Its
+    covariance is diagnose's HAC/GLS one (no input-noise replicas, :mod:`.fits`). None where a fit has no terms.
+    """
+    terms = [base.result.evidence_terms, ext.result.evidence_terms]
+    k = common_scale(terms) if None not in terms else float("nan")
+    if not math.isfinite(k):
+        return {"evidence_scale": None, "delta_log_evidence_calibrated": None}
+    delta = terms[1].log_evidence(k) - terms[0].log_evidence(k)
+    return {"evidence_scale": k, "delta_log_evidence_calibrated": _num(delta)}
 
 
 def _num(v) -> float | None:

@@ -245,6 +245,10 @@ def test_two_effects_are_both_named():
     assert out["cause"] in out["effects"]
     assert set(get_model(out["extended"]["model"]).effects) == {EFFECTS["force_offset"], EFFECTS["stiffness_drift"]}
     assert out["gain"]["mse_ratio"] < 1.0
+    # the calibrated gain counts the record's information, not its samples: tempered (k̄ < 1 with 1 % input
+    # noise), still decisive for two real effects
+    assert 0 < out["gain"]["evidence_scale"] < 1
+    assert 5 < out["gain"]["delta_log_evidence_calibrated"] < out["gain"]["delta_log_evidence"]
     # the second effect was scored against the model that already has the first
     assert [s["round"] for s in out["selection"]] == [1, 2]
 

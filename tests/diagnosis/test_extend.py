@@ -38,17 +38,3 @@ def test_extend_adds_the_hidden_physics_and_only_it(hidden, rank):
         assert out["added"] == []
         assert out["extended"]["model"] == "dahl"
     assert out["unexplained_ratio_b"] is not None
-
-
-def test_at_rate_refits_the_extended_model_on_parts_at_another_rate():
-    from bayes_mr.data.derive import decimate_record
-    from bayes_mr.diagnosis.extend import at_rate
-
-    rec = hidden_record(3.0)
-    a, b = _parts(decimate_record(rec, 2))
-    theta = dict(zip(get_model("dahl").param_names("device"), get_model("dahl").theta("device")))
-    out = extend(a, b, ("dahl", theta), candidates=("inertia",), rank=False)
-    hi_a, hi_b = _parts(rec)
-    hi = at_rate(out["_fit"], hi_a, hi_b)
-    assert hi["fs"] == float(rec.attrs["fs"]) and hi["model"] == "dahl+inertia"
-    assert hi["force_nrmse_b"] <= 1.05 * hi["force_nrmse_b_before"]
