@@ -39,7 +39,7 @@ from . import results
 from .executor import Outcome, run_jobs, share
 from .identify import Identify
 from .inference.estimators import engine
-from .inference.evidence_scale import LaplaceTerms, common_scale
+from .inference.evidence_scale import LaplaceTerms, at_common_scale
 from .identify import validate as validate_fit
 from .models import get_model
 from .progress import say as progress_say
@@ -243,10 +243,10 @@ def calibrated_evidence(rows: list[dict], eng: str | None, models: Sequence[str]
              if r.get("engine") == eng and r.get("evidence_calibration")}
     if eng is None or not all(m in terms for m in models):
         return {}
-    k = common_scale(list(terms.values()))
-    if not math.isfinite(k):
+    pooled = at_common_scale(terms)
+    if pooled is None:
         return {}
-    ln_z = {m: t.log_evidence(k) for m, t in terms.items()}
+    k, ln_z = pooled
     best = max(ln_z, key=ln_z.get)
     return {"evidence_scale": k, "log_evidence_calibrated": ln_z, "evidence_route_calibrated": "laplace",
             "bayes_factors_calibrated": {m: ln_z[best] - z for m, z in ln_z.items()}, "selected_calibrated": best}

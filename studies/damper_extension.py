@@ -115,7 +115,6 @@ def main(out_dir: str | Path = "results/studies/damper-extension", quick: bool =
     idata = Identify(model, LeastSquares(), input_interp=budget.input_interp).fit(part_a, seed=seed, progress=False)
     base_theta = results.point_of(idata)
     ext = extend(part_a, part_b, (model, base_theta), rank=True, seed=seed, progress=say)
-    ext.pop("_fit")
     figure(part_b, ext["base"]["params"], ext["extended"]["model"], ext["extended"]["params"], model,
            out_dir / "extension_part_b.png")
     out = {"record": info, "model": model, "extension": ext, "wall_s": time.perf_counter() - t0}

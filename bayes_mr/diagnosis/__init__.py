@@ -30,7 +30,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from ..inference.evidence_scale import common_scale
+from ..inference.evidence_scale import at_common_scale
 from ..inference.lsq import LSQSettings
 from ..models import NONE, Model, get_model
 from ..progress import say as progress_say
@@ -244,16 +244,16 @@ def _calibrated_gain(base: Fit, ext: Fit) -> dict:
     """``evidence_scale`` k̄ and ``delta_log_evidence_calibrated``: ln Z_k̄(extended) − ln Z_k̄(baseline).
 
     The Laplace evidences of the two fits' likelihood raised to their pooled k̄ (as ``compare``'s calibrated
-    Bayes factors, :func:`~bayes_mr.inference.evidence_scale.common_scale`): the raw difference counts every
+    Bayes factors, :func:`~bayes_mr.inference.evidence_scale.at_common_scale`): the raw difference counts every
     sample as independent and grows with the sampling rate, this one counts what the record holds. Its
     covariance is diagnose's HAC/GLS one (no input-noise replicas, :mod:`.fits`). None where a fit has no terms.
     """
-    terms = [base.result.evidence_terms, ext.result.evidence_terms]
-    k = common_scale(terms) if None not in terms else float("nan")
-    if not math.isfinite(k):
+    terms = {"base": base.result.evidence_terms, "ext": ext.result.evidence_terms}
+    pooled = at_common_scale(terms) if None not in terms.values() else None
+    if pooled is None:
         return {"evidence_scale": None, "delta_log_evidence_calibrated": None}
-    delta = terms[1].log_evidence(k) - terms[0].log_evidence(k)
-    return {"evidence_scale": k, "delta_log_evidence_calibrated": _num(delta)}
+    k, ln_z = pooled
+    return {"evidence_scale": k, "delta_log_evidence_calibrated": _num(ln_z["ext"] - ln_z["base"])}
 
 
 def _num(v) -> float | None:

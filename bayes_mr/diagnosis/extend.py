@@ -144,8 +144,7 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         against the base), ``steps`` (each addition tried, with the part-B
         NRMSE after it), ``unexplained_b`` (what the extended model leaves on
         B: residual over noise floor, by command state, band, …),
-        ``wall_s``, and ``_fit``, the extended :class:`~.fits.Fit` (for
-        a caller that goes on with it; private, left out of JSON summaries).
+        and ``wall_s``.
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
@@ -172,7 +171,7 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         "base": _summary(first, part_a, part_b), "extended": _summary(fit, part_a, part_b), "added": added,
         "ranking": [c.to_dict() for c in ranking], "steps": steps, "threshold": threshold, "chain": bool(chain),
         "unexplained_b": unexp, "unexplained_ratio_b": _num(worst_ratio(unexp)) if unexp else None,
-        "wall_s": round(_time.perf_counter() - t0, 2), "_fit": fit,
+        "wall_s": round(_time.perf_counter() - t0, 2),
     }
 
 

@@ -164,3 +164,11 @@ def common_scale(terms: list[LaplaceTerms]) -> float:
     p = sum(t.n_params for t in terms)
     tr = sum(float(t.trace_hc) for t in terms)
     return min(1.0, p / tr) if tr > 0 and math.isfinite(tr) else float("nan")
+
+
+def at_common_scale(terms: dict[str, LaplaceTerms]) -> tuple[float, dict[str, float]] | None:
+    """k̄ of :func:`common_scale` and each model's ln Z_k̄ [nats] (name → value); None when k̄ is not finite."""
+    k = common_scale(list(terms.values()))
+    if not math.isfinite(k):
+        return None
+    return k, {m: t.log_evidence(k) for m, t in terms.items()}
