@@ -236,7 +236,7 @@ def cmd_diagnose(args) -> int:
     with _executor(args) as ex:
         out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
                        progress=progress_say(on_terminal(not args.quiet)), executor=ex, noise=args.noise,
-                       terms=args.terms)
+                       terms=args.terms, search=args.search)
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
           f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}; {out['verdict']}",
           file=sys.stderr)

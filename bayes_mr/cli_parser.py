@@ -154,6 +154,10 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("--terms", action=argparse.BooleanOptionalAction, default=None,
                    help="search the library of terms (products of x, xdot, z, u, |.|, sgn) for what the model "
                         "leaves (default: when the verdict is 'unexplained by the vocabulary')")
+    p.add_argument("--search", choices=("forward", "ranked"), default="forward",
+                   help="forward (default): re-screen every remaining effect after each one added; ranked: rank "
+                        "them once against the baseline and add the passing ones best first, each refitted and "
+                        "kept only if it still passes (one fit per effect: a stiff model on a long record)")
     _executor_flags(p, "the candidate effects' fits")
     _job_flags(p, out="write the Markdown report, figures, baseline.nc and extended.nc here",
                json=("REPORT.json", "write the report here (default: stdout)"))

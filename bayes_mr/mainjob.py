@@ -92,11 +92,12 @@ class Budget:
         The other one is also fitted by least squares, so the report says how
         the model choice and the Bayes factors move between them.
     diagnose_s : float or None
-        Diagnose the selected model, and the best of the thesis's forms when
-        that is another, on the first this-many seconds of part A (None: all
-        of A; 0: no diagnosis). Each effect is a refit of the model, so for a
-        stiff 14-parameter model (Spencer: ~95 s on 4 s, measured) the window
-        sets the cost.
+        Diagnose the selected model on the first this-many seconds of part A
+        (None: all of A; 0: no diagnosis).
+    diagnose_fs : float or None
+        Sampling rate of the diagnosis [Hz] (None: :attr:`fs`). Issue 15: the
+        record's own rate or ≥ 1 kHz — a command switch and the field's
+        sub-millisecond lag are below a 4-ms sample.
     """
 
     fs: float
@@ -108,7 +109,8 @@ class Budget:
     evidence: str = "ti"
     ukf_lhs: int = 3
     ukf_taus: tuple[float, ...] = TAUS
-    diagnose_s: float | None = 4.0
+    diagnose_s: float | None = None
+    diagnose_fs: float | None = 1000.0
     noise: str = "iid"
     input_interp: str | None = "linear"
 
@@ -128,10 +130,11 @@ class Budget:
 FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=5,
               mcmc=MCMCSettings(max_steps=1000, max_seconds=150.0, check_every=250), evidence="laplace",
               ukf_lhs=2)
-#: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains).
+#: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
+#: diagnosis on that window's part A at 1 kHz, ~15 s).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
                mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
-               evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1), diagnose_s=0.0)
+               evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1))
 
 
 def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Dataset, xr.Dataset, xr.Dataset, dict]:
@@ -277,26 +280,43 @@ def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, ou
     return out
 
 
-def diagnose_models(part_a, part_b, models, budget: Budget, *, seed: int, out_dir: Path, say) -> dict[str, dict]:
-    """Diagnose each of ``models`` (once each, Nones skipped) on the start of part A, validated on B.
+def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, rows: list[dict],
+                      seed: int, out_dir: Path, say) -> dict[str, dict]:
+    """Diagnose the selected model on part A at :attr:`Budget.diagnose_fs`, its extension validated on B.
 
-    The window is the first :attr:`Budget.diagnose_s` seconds of A (all of A
-    when None); each diagnosis writes its report under
-    ``out_dir/diagnose_MODEL``. A failed diagnosis is kept as ``{"error": …}``.
+    The record is prepared again at the diagnosis's rate (same trim and split
+    as the comparison's, :func:`prepare`); the model is refitted there from
+    its least-squares optimum of the comparison (:func:`bayes_mr.diagnosis.extend.fit_at`,
+    no search from scratch), and :func:`~bayes_mr.diagnosis.diagnose` ranks
+    the MR-damper effects (:data:`~bayes_mr.diagnosis.extend.CANDIDATES`) once against it and adds the passing
+    ones best first (``search="ranked"``). The report, figures, ``baseline.nc``
+    and ``extended.nc`` go to ``out_dir/diagnose_MODEL``; the extended model,
+    as fitted on A, predicts part B at the same rate (``validation``).
+
+    Returns
+    -------
+    dict
+        ``{model: diagnose JSON}`` (``{"error": …}`` when it failed), plus the
+        private ``_part_b`` (part B at the diagnosis's rate) for the figures.
     """
     from .diagnosis import diagnose
+    from .diagnosis.extend import CANDIDATES
 
-    window = part_a if budget.diagnose_s is None else part_a.isel(
-        time=slice(0, int(budget.diagnose_s * float(part_a.attrs["fs"]))))
-    diag: dict[str, dict] = {}
-    for model in dict.fromkeys(m for m in models if m is not None):
-        say(f"diagnosing {model} on {window.sizes['time'] / float(part_a.attrs['fs']):.1f} s of part A")
-        try:
-            diag[model] = diagnose(window, model, validate=part_b, seed=seed, progress=say,
-                                   out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
-        except (RuntimeError, ValueError) as exc:
-            diag[model] = {"error": str(exc)}
-    return diag
+    row = next((r for r in rows if r["model"] == model and r["engine"] == "lsq" and "error" not in r), None)
+    if row is None:
+        return {model: {"error": f"{model} has no least-squares fit to start the diagnosis from"}}
+    _, a_hi, b_hi, _ = prepare(replace(budget, fs=budget.diagnose_fs or budget.fs), record)
+    window = a_hi if budget.diagnose_s is None else a_hi.isel(
+        time=slice(0, int(budget.diagnose_s * float(a_hi.attrs["fs"]))))
+    say(f"diagnosing {model} on {window.sizes['time'] / float(a_hi.attrs['fs']):.1f} s of part A at "
+        f"{float(a_hi.attrs['fs']):.0f} Hz (from its least-squares optimum)")
+    try:
+        out = diagnose(window, model, start=row.get("point") or row["params"], search="ranked",
+                       candidates=CANDIDATES, max_effects=5, validate=b_hi, seed=seed, progress=say,
+                       noise=budget.noise, out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
+    except (RuntimeError, ValueError) as exc:
+        out = {"error": str(exc)}
+    return {model: out, "_part_b": b_hi}
 
 
 def _strip(d):
@@ -381,7 +401,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     thesis_form = _best_thesis_form(comp)
     diag: dict[str, dict] = {}
     if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
-        diag = _timed(timing, "diagnose", diagnose_models, part_a, part_b, (selected, thesis_form), budget,
+        diag = _timed(timing, "diagnose", diagnose_selected, record, selected, budget, rows=comp["rows"],
                       seed=seed, out_dir=out_dir, say=say)
     vst = None
     if "shake_table" in stages and thesis_form is not None:
@@ -389,7 +409,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
                      out_dir=out_dir, say=say)
 
     best = _best_by_validation(comp["rows"])
-    figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst)
+    figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst, diag)
     summary = {
         "budget": {k: (v if not isinstance(v, MCMCSettings) else asdict(v)) for k, v in asdict(budget).items()},
         "record": info,

@@ -130,6 +130,16 @@ def test_run_quick_end_to_end(tmp_path):
     key = "selected_calibrated" if s["selected_on"] == "calibrated" else "selected"
     assert s["noise_sensitivity"]["iid"][key] == s["selected"]
     assert "AR residual model" in text
+    # issue 15: the selected model diagnosed on the whole of part A at >= 1 kHz, its extension predicting B
+    d = s["diagnose"][s["selected"]]
+    assert d["record"]["fs"] >= 1000 and d["record"]["duration_s"] == pytest.approx(s["record"]["part_a_s"], abs=0.01)
+    assert d["baseline"]["model"] == s["selected"] and d["extended"]["model"].startswith(s["selected"])
+    v = d["validation"]
+    assert 0 < v["extended_force_nrmse"] < 1 and 0 < v["baseline_force_nrmse"] < 1
+    if d["effects"]:  # an extension is kept only if it lowers the error on A; B is where it is checked
+        assert d["gain"]["mse_ratio"] < 1
+    assert d["unexplained_ratio"] > 0 and f"Diagnosis of {s['selected']}" in text
+    assert (out / f"diagnose_{s['selected']}" / "extended.nc").exists()
 
 
 def test_selection_route_names_the_route_the_evidence_came_by():

@@ -37,6 +37,7 @@ from ..progress import say as progress_say
 from ..scores import score
 from .fits import Fit, fit_model, inference_data, predict
 from .residuals import residual_views, varying_voltage
+from .extend import fit_at, ranked_select
 from .screen import THRESHOLD, Candidate, forward_select
 from .terms import search_terms
 from .unexplained import BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
@@ -97,6 +98,7 @@ def diagnose(
     max_effects: int = 3,
     settings: LSQSettings | None = None, noise: str = "iid",
     executor=None, terms: bool | None = None,
+    search: str = "forward", start: dict[str, float] | None = None, candidates: tuple[str, ...] | None = None,
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -130,6 +132,19 @@ def diagnose(
         Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
     terms : bool, optional
         Search the term library (:mod:`.terms`): always, never, or (None) on "unexplained by the vocabulary".
+    search : {"forward", "ranked"}
+        How effects are added. ``forward``: re-screen every remaining effect
+        after each addition (:func:`.screen.forward_select`). ``ranked``: rank
+        them once against the baseline and add the passing ones best first,
+        each refitted and kept only if it still passes
+        (:func:`.extend.ranked_select`; one fit per effect and one refit per
+        addition, for a stiff model on a long record).
+    start : dict, optional
+        Parameters [SI] of ``model`` to refit the baseline from (e.g. its optimum
+        on the same record at another rate, :func:`.extend.fit_at`) instead of
+        a search from scratch; needs ``model``.
+    candidates : tuple of str, optional
+        Effects tried (None: every applicable one).
 
     Returns
     -------
@@ -147,11 +162,18 @@ def diagnose(
     t0 = _time.perf_counter()
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
-    base, baselines = _baseline(record, model, settings, say, noise)
+    if search not in ("forward", "ranked"):
+        raise ValueError(f"search must be 'forward' or 'ranked', got {search!r}")
+    base, baselines = _baseline(record, model, settings, say, noise, start)
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
-    selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
-                                      progress=say, executor=executor)
+    if search == "forward":
+        selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
+                                          progress=say, executor=executor, candidates=candidates)
+    else:
+        selected, ranking, _ = ranked_select(record, base, candidates=candidates, threshold=threshold,
+                                             max_effects=max_effects, seed=seed, progress=say, executor=executor)
+        rounds = [ranking]
     ext = selected[-1].fit if selected else base
     after = residual_views(record, ext.predicted) if selected else before
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
@@ -169,13 +191,18 @@ def diagnose(
     return out
 
 
-def _baseline(record: xr.Dataset, model, settings: LSQSettings, say,
-              noise: str = "iid") -> tuple[Fit, list[dict] | None]:
-    """The baseline fit (``model``, or the form of highest evidence) and the form comparison (None if given)."""
+def _baseline(record: xr.Dataset, model, settings: LSQSettings, say, noise: str = "iid",
+              start: dict[str, float] | None = None) -> tuple[Fit, list[dict] | None]:
+    """The baseline fit (``model``, from ``start`` or a search; or the form of highest evidence) and the form
+    comparison (None if given)."""
     if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
         raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
     if model is None:
+        if start is not None:
+            raise ValueError("diagnose: a start needs the model it belongs to (model=...)")
         return select_baseline(record, settings=settings, progress=say, noise=noise)
+    if start is not None:
+        return fit_at(record, model, start, noise=noise), None
     return fit_model(record, get_model(model), settings, noise=noise), None
 
 

@@ -44,7 +44,7 @@ from ..scores import force_nrmse
 from .chain import ChainOutputError, through_chain
 from .fits import Fit, _finish, converge, laplace, predict
 from .residuals import residual_views
-from .screen import THRESHOLD, applicable, passes, screen_one
+from .screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one
 from .unexplained import unexplained, worst_ratio
 
 #: Effects the extension tries: the physics of an MR damper the vocabulary holds (a sensor delay and a
@@ -53,16 +53,18 @@ CANDIDATES = ("inertia", "command_saturation", "field_decay", "field_dynamics", 
               "stribeck_friction", "asymmetry", "force_offset", "low_velocity_rolloff", "voltage_dependence")
 
 
-def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float], *, chain: bool = False) -> Fit:
+def fit_at(record: xr.Dataset, model: Model | str, theta: dict[str, float], *, chain: bool = False,
+           noise: str = "iid") -> Fit:
     """``model`` refitted on ``record`` from the parameters ``theta`` [SI] (its optimum elsewhere or here).
 
     Parameters missing from ``theta`` take their defaults; spencer's reported
     ``x0`` is turned back into the preload ``F_pre = k1·x0`` it stands for.
     With ``chain`` the prediction passes through the record's decimation
-    filter (:class:`~.chain.ChainOutputError`), and so do every extension's.
+    filter (:class:`~.chain.ChainOutputError`), and so do every extension's;
+    ``noise`` is the residual model (``"iid"`` or ``"ar"``).
     """
     model = get_model(model)
-    lik = (ChainOutputError if chain else OutputError)(model, record)
+    lik = (ChainOutputError if chain else OutputError)(model, record, residual=noise)
     theta = dict(theta)
     if "F_pre" in lik.par.names and "F_pre" not in theta and {"k1", "x0"} <= set(theta):
         theta["F_pre"] = theta["k1"] * theta["x0"]
@@ -100,6 +102,72 @@ def _num(v) -> float | None:
     return None if v is None or not math.isfinite(float(v)) else float(v)
 
 
+def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] | None = None,
+                  threshold: float = THRESHOLD, max_effects: int = 5, rank: bool = True, seed: int = 0,
+                  progress=None, executor=None) -> tuple[list[Candidate], list[Candidate], list[Candidate]]:
+    """Rank the candidate effects once against ``base``; add the passing ones best first.
+
+    The first passing effect is kept as ranked; each later one is refitted as
+    an extension of the model so far (warm-started there,
+    :func:`~.screen.screen_one`) and kept only if it still passes
+    (:func:`~.screen.passes`). Unlike :func:`~.screen.forward_select`, the
+    other effects are not re-screened after each addition: one ranking and one
+    refit per passing effect, which keeps a stiff device model at a high rate
+    within minutes.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+    base : Fit
+        The base model's fit on ``record``.
+    candidates : tuple of str, optional
+        Effects tried, in this order without ``rank`` (None: every applicable
+        one, :func:`~.screen.applicable`; names that do not apply are skipped).
+    threshold : float
+        Score an effect must pass.
+    max_effects : int
+        Most effects added.
+    rank : bool
+        False: no ranking; every candidate is tried once, in the order given,
+        against the model so far.
+    seed : int
+    progress : callable, optional
+    executor : object, optional
+        Fits the ranking's candidates as parallel jobs (same result, :func:`~.screen.screen`).
+
+    Returns
+    -------
+    selected : list of Candidate
+        Effects added, in order (each scored against the model before it).
+    ranking : list of Candidate
+        Every candidate against ``base``, best first (empty without ``rank``).
+    tried : list of Candidate
+        Each addition tried, kept or not, in order.
+    """
+    say = progress or (lambda msg: None)
+    offered = [e.name for e in applicable(base.model, record)]
+    names = offered if candidates is None else [n for n in candidates if n in offered]
+    ranking: list[Candidate] = []
+    if rank:
+        ranking = screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor)
+        names = [c.name for c in ranking if passes(c, threshold)]
+    selected: list[Candidate] = []
+    tried: list[Candidate] = []
+    fit = base
+    for name in names:
+        if len(selected) >= max_effects:
+            break
+        first = ranking and not selected
+        now = next(c for c in ranking if c.name == name) if first else screen_one(record, fit, EFFECTS[name], seed=seed)
+        tried.append(now)
+        ok = passes(now, threshold)
+        say(f"  + {name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}")
+        if ok:
+            fit = now.fit
+            selected.append(now)
+    return selected, ranking, tried
+
+
 def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict], *,
            candidates: tuple[str, ...] = CANDIDATES, threshold: float = THRESHOLD, max_effects: int = 5,
            rank: bool = True, chain: bool = False, seed: int = 0, progress=None) -> dict:
@@ -121,10 +189,10 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
         Most effects added.
     rank : bool
         Rank the candidates against the base first (one fit each) and add the
-        passing ones best first; False tries them in the order given, each
-        once against the current model (about half the fits: for a stiff
-        model whose likely effects are known, e.g. :data:`CANDIDATES`' order
-        on an MR damper's device test).
+        passing ones best first (:func:`ranked_select`); False tries them in
+        the order given, each once against the current model (about half the
+        fits: for a stiff model whose likely effects are known, e.g.
+        :data:`CANDIDATES`' order on an MR damper's device test).
     chain : bool
         Fit with every prediction passed through the record's decimation
         filter (:mod:`.chain`). Off by default: on the NEES spencer it moved
@@ -148,43 +216,21 @@ def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict],
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
-    fit = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1], chain=chain)
-    first = fit
-    say(f"extend {fit.name}: base on A refitted, part B NRMSE {part_nrmse(fit, part_b):.4f}")
-    names, ranking = _order(part_a, fit, candidates, rank, threshold, seed, say)
-    steps, added = [], []
-    for name in names:
-        if len(added) >= max_effects:
-            break
-        cand = next((c for c in ranking if c.name == name), None)
-        now = cand if cand is not None and not added else screen_one(part_a, fit, EFFECTS[name], seed=seed)
-        ok = passes(now, threshold)
-        steps.append(_step(name, now, part_b, ok))
-        say(f"  + {name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}; "
-            f"part B NRMSE {steps[-1]['force_nrmse_b']}")
-        if ok:
-            fit = now.fit
-            added.append(name)
+    first = base if isinstance(base, Fit) else fit_at(part_a, base[0], base[1], chain=chain)
+    say(f"extend {first.name}: base on A refitted, part B NRMSE {part_nrmse(first, part_b):.4f}")
+    selected, ranking, tried = ranked_select(part_a, first, candidates=candidates, threshold=threshold,
+                                             max_effects=max_effects, rank=rank, seed=seed, progress=say)
+    steps = [_step(c.name, c, part_b, any(c is s for s in selected)) for c in tried]
+    fit = selected[-1].fit if selected else first
     pred_b = predict(fit.model, part_b, fit.theta_full)
     unexp = unexplained(part_b, residual_views(part_b, pred_b)) if pred_b is not None else {}
     return {
-        "base": _summary(first, part_a, part_b), "extended": _summary(fit, part_a, part_b), "added": added,
+        "base": _summary(first, part_a, part_b), "extended": _summary(fit, part_a, part_b),
+        "added": [c.name for c in selected],
         "ranking": [c.to_dict() for c in ranking], "steps": steps, "threshold": threshold, "chain": bool(chain),
         "unexplained_b": unexp, "unexplained_ratio_b": _num(worst_ratio(unexp)) if unexp else None,
         "wall_s": round(_time.perf_counter() - t0, 2),
     }
-
-
-def _order(part_a: xr.Dataset, fit: Fit, candidates, rank: bool, threshold: float, seed: int, say):
-    """Names to try, in order, and the ranking against ``fit`` (empty without ``rank``)."""
-    offered = {e.name for e in applicable(fit.model, part_a)}
-    names = [n for n in candidates if n in offered]
-    if not rank:
-        return names, []
-    ranking = sorted((screen_one(part_a, fit, EFFECTS[n], seed=seed) for n in names), key=lambda c: -c.score)
-    for c in ranking:
-        say(f"  {c.name}: score {c.score:.4g}, MSE ratio {c.mse_ratio if c.fit else float('nan'):.3f}")
-    return [c.name for c in ranking if passes(c, threshold)], ranking
 
 
 def _summary(fit: Fit, part_a: xr.Dataset, part_b: xr.Dataset) -> dict:

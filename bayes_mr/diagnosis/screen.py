@@ -410,13 +410,13 @@ def passes(c: Candidate, threshold: float = THRESHOLD) -> bool:
 
 
 def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,
-                   seed: int = 0, progress=None, executor=None) -> tuple[list[Candidate], list[list[Candidate]]]:
+                   seed: int = 0, progress=None, executor=None,
+                   candidates=None) -> tuple[list[Candidate], list[list[Candidate]]]:
     """Greedy forward selection of effects.
 
-    Screen every applicable effect against the current model; add the best if
-    it passes; re-screen the rest against the extended model; stop when
-    nothing passes (or after ``max_effects``). ``executor`` fits each round's
-    candidates as parallel jobs (:func:`screen`).
+    Screen every applicable effect (of ``candidates``, names, when given) against the current model; add the
+    best if it passes; re-screen the rest against the extended model; stop when nothing passes (or after
+    ``max_effects``). ``executor`` fits each round's candidates as parallel jobs (:func:`screen`).
 
     Returns
     -------
@@ -430,7 +430,8 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
     current = base
     for _ in range(max_effects):
         have = {c.name for c in selected}
-        effects = [e for e in applicable(current.model, record) if e.name not in have]
+        effects = [e for e in applicable(current.model, record)
+                   if e.name not in have and (candidates is None or e.name in candidates)]
         if not effects:
             break
         ranked = screen(record, current, effects, seed=seed, progress=progress, executor=executor)

@@ -24,8 +24,8 @@ def _row(rows: list[dict], model: str | None, engine: str) -> dict | None:
 
 
 def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: str | None, best: dict | None,
-                spencer: dict, vst: dict | None) -> dict[str, str]:
-    """Force on B (measured, selected identified, published Spencer), loops, and the shake-table force.
+                spencer: dict, vst: dict | None, diag: dict | None = None) -> dict[str, str]:
+    """Force on B (measured, extended and selected identified, published Spencer), loops, and the shake-table force.
 
     Parameters
     ----------
@@ -43,6 +43,10 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
         :func:`bayes_mr.mainjob_context.published_spencer` (``params`` [SI]).
     vst : dict or None
         :func:`bayes_mr.mainjob.shake_table` with its private arrays (``_vst_b``, ``_force_b``).
+    diag : dict, optional
+        :func:`bayes_mr.mainjob.diagnose_selected` (``{model: diagnose JSON, "_part_b": part B at its rate}``).
+        When the diagnosis ran, the part-B figures are drawn at its rate with the extended model first (the
+        package's best physical model, fitted on A), then the selected model as refitted there.
 
     Returns
     -------
@@ -52,7 +56,21 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     figs = {}
     t = part_b["time"].values
     curves = {"measured": part_b["force"].values}
-    sel = _row(rows, selected, "lsq")
+    diagnosed = _diagnosed(diag)
+    if diagnosed is not None:
+        part_b, d = diagnosed
+        curves = {"measured": part_b["force"].values}
+        fs = float(part_b.attrs["fs"])
+        fits = {d["extended"]["model"]: ("extended on A", d["extended"]),  # one curve when nothing was added
+                d["baseline"]["model"]: ("selected, refitted on A", d["baseline"])}
+        for model, (what, fit) in sorted(fits.items(), key=lambda kv: kv[1][1] is d["baseline"]):
+            try:
+                curves[f"{model} ({what} at {fs:.0f} Hz)"] = predict(model, part_b, fit["params"])["force"]
+            except ValueError:
+                pass
+    # without a diagnosis: the selected model as the comparison fitted it, and the best on B beside it
+    sel = _row(rows, selected, "lsq") if diagnosed is None else None
+    best = best if diagnosed is None else None
     if best is not None and sel is not None and (best["model"], best["engine"]) == (sel["model"], "lsq"):
         best = None  # the selected model is also the best on B: one curve
     for label, r in ((f"{selected} (lsq, selected by evidence)", sel),
@@ -80,6 +98,14 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
                                                  title="virtual shake table, part B"),
                                      out_dir / "shake_table_force.png"))
     return figs
+
+
+def _diagnosed(diag: dict | None) -> tuple[xr.Dataset, dict] | None:
+    """(part B at the diagnosis's rate, the diagnosis) when the main job's diagnosis ran and succeeded."""
+    if not diag or "_part_b" not in diag:
+        return None
+    d = next((v for k, v in diag.items() if not k.startswith("_") and "error" not in v), None)
+    return None if d is None else (diag["_part_b"], d)
 
 
 #: Length of the part-B window the force figure shows [s]: a few cycles of the record's motion, readable.
@@ -203,6 +229,25 @@ def _floor_sentence(rec: dict) -> str:
     return (" Noise floor" + where + ": " + ", ".join(f"{c} {fmt(v, 3)}" for c, v in sd.items()) + " (SI).")
 
 
+def diagnosis_sentence(model: str, d: dict) -> str:
+    """What the diagnosis of ``model`` added, what it gained on A and on B, and what it still leaves."""
+    g, v, rec = d["gain"], d.get("validation") or {}, d["record"]
+    head = (f"Diagnosis of {model} (on {rec['duration_s']:.1f} s of part A at {rec['fs']:.0f} Hz): "
+            f"cause **{d['cause']}**")
+    if d["effects"]:
+        head += (f" (effects {', '.join(d['effects'])}); extended model {d['extended']['model']}: MSE ratio on A "
+                 f"{fmt(g['mse_ratio'], 3)}, Δ ln Z {fmt(g['delta_log_evidence'], 4)} (calibrated "
+                 f"{fmt(g.get('delta_log_evidence_calibrated'), 4)}); part B force NRMSE "
+                 f"{fmt(v.get('baseline_force_nrmse'), 4)} → {fmt(v.get('extended_force_nrmse'), 4)}.")
+    else:
+        head += " — no effect passes the calibrated threshold."
+    ratio = d.get("unexplained_ratio")
+    if ratio is not None:
+        head += (f" What the final model leaves on A is {fmt(ratio, 3)} × the noise floor (worst channel; "
+                 f"{'at the floor' if d.get('at_noise_floor') else 'model error, not noise'}).")
+    return head
+
+
 def headline(summary: dict) -> list[str]:
     """The sentences a structural engineer reads first (every number from this run)."""
     rows, sel = summary["rows"], summary["selected"]
@@ -239,12 +284,7 @@ def headline(summary: dict) -> list[str]:
         if "error" in d:
             lines.append(f"Diagnosis of {model} failed: {d['error']}")
             continue
-        g = d["gain"]
-        lines.append(f"Diagnosis of {model} (on {d['record']['duration_s']:.1f} s of part A): cause **{d['cause']}**"
-                     + (f" (effects {', '.join(d['effects'])}); extended model {d['extended']['model']}: MSE ratio "
-                        f"{fmt(g['mse_ratio'], 3)}, Δ ln Z {fmt(g['delta_log_evidence'], 4)}, error ratio on part B "
-                        f"{fmt(g['validation_mse_ratio'], 3)}." if d["effects"] else
-                        " — no effect passes the calibrated threshold."))
+        lines.append(diagnosis_sentence(model, d))
     v = summary.get("shake_table")
     if v and "ukf" in v and "error" not in v["ukf"]:
         u = v["ukf"]
@@ -288,8 +328,9 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
         else:
             folder = f"diagnose_{model.replace('+', '_')}"
             ranked = ", ".join(f"{c['name']} {fmt(c['score'], 3)}" for c in d["causes"][:4])
-            out.append(f"Full report: [{folder}/diagnose.md]({folder}/diagnose.md). Cause: **{d['cause']}** "
-                       f"(scores, threshold {fmt(d['threshold'], 3)}: {ranked}).")
+            out.append(f"Full report: [{folder}/diagnose.md]({folder}/diagnose.md). "
+                       + diagnosis_sentence(model, d) + f" Ranking (scores, threshold {fmt(d['threshold'], 3)}): "
+                       f"{ranked}.")
             out += ["", f"![residuals]({folder}/residuals_time.png)"]
         out.append("")
     v = summary.get("shake_table")
