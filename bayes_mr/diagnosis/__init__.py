@@ -37,8 +37,9 @@ from ..progress import say as progress_say
 from ..scores import score
 from .fits import Fit, fit_model, inference_data, predict
 from .residuals import residual_views, varying_voltage
-from .extend import fit_at, ranked_select
-from .screen import THRESHOLD, Candidate, forward_select
+from .extend import fit_at
+from .search import forward_select, ranked_select
+from .screen import THRESHOLD, Candidate
 from .terms import search_terms
 from .unexplained import BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 
@@ -134,10 +135,10 @@ def diagnose(
         Search the term library (:mod:`.terms`): always, never, or (None) on "unexplained by the vocabulary".
     search : {"forward", "ranked"}
         How effects are added. ``forward``: re-screen every remaining effect
-        after each addition (:func:`.screen.forward_select`). ``ranked``: rank
+        after each addition (:func:`.search.forward_select`). ``ranked``: rank
         them once against the baseline and add the passing ones best first,
         each refitted and kept only if it still passes
-        (:func:`.extend.ranked_select`; one fit per effect and one refit per
+        (:func:`.search.ranked_select`; one fit per effect and one refit per
         addition, for a stiff model on a long record).
     start : dict, optional
         Parameters [SI] of ``model`` to refit the baseline from (e.g. its optimum

@@ -17,7 +17,7 @@ trained on A only, predict B?
    re-fitted as an extension of the *current* model (warm-started there) and
    kept only if it still passes (:func:`.screen.passes`: the
    autocorrelation-corrected score over the calibrated threshold and a lower
-   MSE on A). Unlike :func:`.screen.forward_select` it does not re-screen
+   MSE on A). Unlike :func:`.search.forward_select` it does not re-screen
    every remaining effect after each addition: one ranking and one refit per
    effect, which keeps a stiff device model within minutes.
 4. **Measure on B.** Base and extended models, as fitted on A, predict B
@@ -44,7 +44,8 @@ from ..scores import force_nrmse
 from .chain import ChainOutputError, through_chain
 from .fits import Fit, _finish, converge, laplace, predict
 from .residuals import residual_views
-from .screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one
+from .screen import THRESHOLD
+from .search import ranked_select
 from .unexplained import unexplained, worst_ratio
 
 #: Effects the extension tries: the physics of an MR damper the vocabulary holds (a sensor delay and a
@@ -100,72 +101,6 @@ def _step(name: str, cand, part_b: xr.Dataset, kept: bool) -> dict:
 
 def _num(v) -> float | None:
     return None if v is None or not math.isfinite(float(v)) else float(v)
-
-
-def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] | None = None,
-                  threshold: float = THRESHOLD, max_effects: int = 5, rank: bool = True, seed: int = 0,
-                  progress=None, executor=None) -> tuple[list[Candidate], list[Candidate], list[Candidate]]:
-    """Rank the candidate effects once against ``base``; add the passing ones best first.
-
-    The first passing effect is kept as ranked; each later one is refitted as
-    an extension of the model so far (warm-started there,
-    :func:`~.screen.screen_one`) and kept only if it still passes
-    (:func:`~.screen.passes`). Unlike :func:`~.screen.forward_select`, the
-    other effects are not re-screened after each addition: one ranking and one
-    refit per passing effect, which keeps a stiff device model at a high rate
-    within minutes.
-
-    Parameters
-    ----------
-    record : xarray.Dataset
-    base : Fit
-        The base model's fit on ``record``.
-    candidates : tuple of str, optional
-        Effects tried, in this order without ``rank`` (None: every applicable
-        one, :func:`~.screen.applicable`; names that do not apply are skipped).
-    threshold : float
-        Score an effect must pass.
-    max_effects : int
-        Most effects added.
-    rank : bool
-        False: no ranking; every candidate is tried once, in the order given,
-        against the model so far.
-    seed : int
-    progress : callable, optional
-    executor : object, optional
-        Fits the ranking's candidates as parallel jobs (same result, :func:`~.screen.screen`).
-
-    Returns
-    -------
-    selected : list of Candidate
-        Effects added, in order (each scored against the model before it).
-    ranking : list of Candidate
-        Every candidate against ``base``, best first (empty without ``rank``).
-    tried : list of Candidate
-        Each addition tried, kept or not, in order.
-    """
-    say = progress or (lambda msg: None)
-    offered = [e.name for e in applicable(base.model, record)]
-    names = offered if candidates is None else [n for n in candidates if n in offered]
-    ranking: list[Candidate] = []
-    if rank:
-        ranking = screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor)
-        names = [c.name for c in ranking if passes(c, threshold)]
-    selected: list[Candidate] = []
-    tried: list[Candidate] = []
-    fit = base
-    for name in names:
-        if len(selected) >= max_effects:
-            break
-        first = ranking and not selected
-        now = next(c for c in ranking if c.name == name) if first else screen_one(record, fit, EFFECTS[name], seed=seed)
-        tried.append(now)
-        ok = passes(now, threshold)
-        say(f"  + {name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}")
-        if ok:
-            fit = now.fit
-            selected.append(now)
-    return selected, ranking, tried
 
 
 def extend(part_a: xr.Dataset, part_b: xr.Dataset, base: Fit | tuple[str, dict], *,

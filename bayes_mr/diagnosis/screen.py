@@ -101,6 +101,8 @@ class Candidate:
         MSE(extended) / MSE(base).
     error : str or None
         Why the fit failed.
+    restart : dict or None
+        The global search of a named extension (:func:`.search.restarted`); None when it did not run.
     """
 
     name: str
@@ -114,6 +116,7 @@ class Candidate:
     mse_ratio: float = 1.0
     error: str | None = None
     runs: list = field(default_factory=list)
+    restart: dict | None = None
 
     @property
     def channel(self) -> str | None:
@@ -134,6 +137,8 @@ class Candidate:
             out["channel"] = self.channel
         if self.error:
             out["error"] = self.error
+        if self.restart is not None:
+            out["restart"] = {k: (_num(v) if isinstance(v, float) else v) for k, v in self.restart.items()}
         return out
 
 
@@ -407,38 +412,3 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
 def passes(c: Candidate, threshold: float = THRESHOLD) -> bool:
     """The decision: enough evidence, and the extension lowers the record's error."""
     return c.fit is not None and c.score > threshold and c.mse_ratio < 1.0
-
-
-def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,
-                   seed: int = 0, progress=None, executor=None,
-                   candidates=None) -> tuple[list[Candidate], list[list[Candidate]]]:
-    """Greedy forward selection of effects.
-
-    Screen every applicable effect (of ``candidates``, names, when given) against the current model; add the
-    best if it passes; re-screen the rest against the extended model; stop when nothing passes (or after
-    ``max_effects``). ``executor`` fits each round's candidates as parallel jobs (:func:`screen`).
-
-    Returns
-    -------
-    selected : list of Candidate
-        Effects added, in order (each scored against the model before it).
-    rounds : list of list of Candidate
-        The ranked screen of each round (round 0 is against the baseline).
-    """
-    selected: list[Candidate] = []
-    rounds: list[list[Candidate]] = []
-    current = base
-    for _ in range(max_effects):
-        have = {c.name for c in selected}
-        effects = [e for e in applicable(current.model, record)
-                   if e.name not in have and (candidates is None or e.name in candidates)]
-        if not effects:
-            break
-        ranked = screen(record, current, effects, seed=seed, progress=progress, executor=executor)
-        rounds.append(ranked)
-        best = ranked[0]
-        if not passes(best, threshold):
-            break
-        selected.append(best)
-        current = best.fit
-    return selected, rounds

@@ -1,0 +1,142 @@
+"""How effects are added to a model: forward selection, one ranking, and the restart of each named extension.
+
+:func:`forward_select` re-screens every remaining effect after each addition
+(diagnose's default); :func:`ranked_select` ranks them once and adds the
+passing ones best first (a stiff model on a long record). Either way an effect
+that passes is searched again over every parameter before it is kept
+(:func:`restarted`, issue 15 item 5): the local refits of the screen start at
+the base optimum, which may already have absorbed part of the effect.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import xarray as xr
+
+from ..models import EFFECTS
+from .fits import Fit, global_refit
+from .screen import THRESHOLD, Candidate, applicable, passes, score, screen, screen_one
+
+
+def restarted(base: Fit, cand: Candidate, *, seed: int = 0) -> Candidate:
+    """``cand`` (an effect that passed against ``base``) after a global search of its extension, rescored.
+
+    The extension is searched again by differential evolution (:func:`.fits.global_refit`) and
+    kept if it fits better; the score, MSE ratio and evidence gain are recomputed against
+    ``base``. ``restart`` records what was done (or why it was skipped). ``sensor_delay``
+    keeps its exhaustive grid over lags.
+    """
+    if cand.fit is None or cand.name == "sensor_delay":
+        return cand
+    fit, info = global_refit(cand.fit, [p.name for p in cand.effect.params], seed=seed)
+    if fit is cand.fit:
+        return replace(cand, restart=info)
+    s, kappa, dll, occam = score(base, fit, cand.effect)
+    return replace(cand, fit=fit, score=s, kappa=kappa, delta_loglik=dll, occam=occam,
+                   delta_log_evidence=fit.result.log_evidence - base.result.log_evidence,
+                   mse_ratio=fit.mse / base.mse, restart=info)
+
+
+def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,
+                   seed: int = 0, progress=None, executor=None,
+                   candidates=None) -> tuple[list[Candidate], list[list[Candidate]]]:
+    """Greedy forward selection of effects.
+
+    Screen every applicable effect (of ``candidates``, names, when given) against the current model; add the
+    best if it passes; re-screen the rest against the extended model; stop when nothing passes (or after
+    ``max_effects``). ``executor`` fits each round's candidates as parallel jobs (:func:`~.screen.screen`). Each
+    effect added is searched again globally first (:func:`restarted`).
+
+    Returns
+    -------
+    selected : list of Candidate
+        Effects added, in order (each scored against the model before it).
+    rounds : list of list of Candidate
+        The ranked screen of each round (round 0 is against the baseline).
+    """
+    selected: list[Candidate] = []
+    rounds: list[list[Candidate]] = []
+    current = base
+    for _ in range(max_effects):
+        have = {c.name for c in selected}
+        effects = [e for e in applicable(current.model, record)
+                   if e.name not in have and (candidates is None or e.name in candidates)]
+        if not effects:
+            break
+        ranked = screen(record, current, effects, seed=seed, progress=progress, executor=executor)
+        rounds.append(ranked)
+        best = ranked[0]
+        if not passes(best, threshold):
+            break
+        best = restarted(current, best, seed=seed)
+        selected.append(best)
+        current = best.fit
+    return selected, rounds
+
+
+def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] | None = None,
+                  threshold: float = THRESHOLD, max_effects: int = 5, rank: bool = True, seed: int = 0,
+                  progress=None, executor=None) -> tuple[list[Candidate], list[Candidate], list[Candidate]]:
+    """Rank the candidate effects once against ``base``; add the passing ones best first.
+
+    The first passing effect is kept as ranked; each later one is refitted as
+    an extension of the model so far (warm-started there,
+    :func:`~.screen.screen_one`) and kept only if it still passes
+    (:func:`~.screen.passes`). Unlike :func:`forward_select`, the
+    other effects are not re-screened after each addition: one ranking and one
+    refit per passing effect, which keeps a stiff device model at a high rate
+    within minutes.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+    base : Fit
+        The base model's fit on ``record``.
+    candidates : tuple of str, optional
+        Effects tried, in this order without ``rank`` (None: every applicable
+        one, :func:`~.screen.applicable`; names that do not apply are skipped).
+    threshold : float
+        Score an effect must pass.
+    max_effects : int
+        Most effects added.
+    rank : bool
+        False: no ranking; every candidate is tried once, in the order given,
+        against the model so far.
+    seed : int
+    progress : callable, optional
+    executor : object, optional
+        Fits the ranking's candidates as parallel jobs (same result, :func:`~.screen.screen`).
+
+    Returns
+    -------
+    selected : list of Candidate
+        Effects added, in order (each scored against the model before it).
+    ranking : list of Candidate
+        Every candidate against ``base``, best first (empty without ``rank``).
+    tried : list of Candidate
+        Each addition tried, kept or not, in order.
+    """
+    say = progress or (lambda msg: None)
+    offered = [e.name for e in applicable(base.model, record)]
+    names = offered if candidates is None else [n for n in candidates if n in offered]
+    ranking: list[Candidate] = []
+    if rank:
+        ranking = screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor)
+        names = [c.name for c in ranking if passes(c, threshold)]
+    selected: list[Candidate] = []
+    tried: list[Candidate] = []
+    fit = base
+    for name in names:
+        if len(selected) >= max_effects:
+            break
+        first = ranking and not selected
+        now = next(c for c in ranking if c.name == name) if first else screen_one(record, fit, EFFECTS[name], seed=seed)
+        ok = passes(now, threshold)
+        if ok:
+            now = restarted(fit, now, seed=seed)
+            fit = now.fit
+            selected.append(now)
+        tried.append(now)
+        say(f"  + {name}: score {now.score:.4g}, {'kept' if ok else 'dropped'}")
+    return selected, ranking, tried
