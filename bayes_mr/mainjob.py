@@ -302,7 +302,7 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
         ``{model: diagnose JSON}`` (``{"error": …}`` when it failed), plus the
         private ``_part_b`` (part B at the diagnosis's rate) for the figures.
     """
-    from .diagnosis import diagnose
+    from .diagnosis import Search, diagnose
     from .diagnosis.extend import CANDIDATES
 
     row = next((r for r in rows if r["model"] == model and r["engine"] == "lsq" and "error" not in r), None)
@@ -314,8 +314,9 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
     say(f"diagnosing {model} on {window.sizes['time'] / float(a_hi.attrs['fs']):.1f} s of part A at "
         f"{float(a_hi.attrs['fs']):.0f} Hz (from its least-squares optimum)")
     try:
-        out = diagnose(window, model, start=row.get("point") or row["params"], search="ranked",
-                       candidates=CANDIDATES, max_effects=5, validate=b_hi, seed=seed, progress=say,
+        out = diagnose(window, model, start=row.get("point") or row["params"],
+                       search=Search("ranked", candidates=CANDIDATES, max_effects=5), validate=b_hi, seed=seed,
+                       progress=say,
                        noise=budget.noise, out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
     except (RuntimeError, ValueError) as exc:
         out = {"error": str(exc)}

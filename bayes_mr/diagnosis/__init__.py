@@ -38,12 +38,12 @@ from ..scores import score
 from .fits import Fit, fit_model, inference_data, predict
 from .residuals import residual_views, varying_voltage
 from .extend import fit_at
-from .search import forward_select, ranked_select
+from .search import Search
 from .screen import THRESHOLD, Candidate
 from .terms import search_terms
 from .unexplained import BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 
-__all__ = ["FORMS", "THRESHOLD", "diagnose", "select_baseline"]
+__all__ = ["FORMS", "THRESHOLD", "Search", "diagnose", "select_baseline"]
 
 #: Forms compared when no baseline is given (spencer only for device tests with a varying voltage).
 FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
@@ -95,11 +95,10 @@ def diagnose(
     *,
     validate: xr.Dataset | str | os.PathLike | None = None,
     out_dir: str | os.PathLike | None = None,
-    seed: int = 0, progress=True, threshold: float = THRESHOLD,
-    max_effects: int = 3,
+    seed: int = 0, progress=True,
     settings: LSQSettings | None = None, noise: str = "iid",
     executor=None, terms: bool | None = None,
-    search: str = "forward", start: dict[str, float] | None = None, candidates: tuple[str, ...] | None = None,
+    search: Search | str = "forward", start: dict[str, float] | None = None,
 ) -> dict:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
@@ -121,10 +120,6 @@ def diagnose(
         Seed of the least-squares candidates and of the effects' starts.
     progress : bool or callable
         Report each stage on stderr (or to the callable).
-    threshold : float
-        Score an effect must exceed to be named (:data:`THRESHOLD`).
-    max_effects : int
-        Most effects added by forward selection.
     settings : LSQSettings, optional
         Settings of the baseline fits.
     noise : {"iid", "ar"}
@@ -133,19 +128,11 @@ def diagnose(
         Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
     terms : bool, optional
         Search the term library (:mod:`.terms`): always, never, or (None) on "unexplained by the vocabulary".
-    search : {"forward", "ranked"}
-        How effects are added. ``forward``: re-screen every remaining effect
-        after each addition (:func:`.search.forward_select`). ``ranked``: rank
-        them once against the baseline and add the passing ones best first,
-        each refitted and kept only if it still passes
-        (:func:`.search.ranked_select`; one fit per effect and one refit per
-        addition, for a stiff model on a long record).
+    search : Search or {"forward", "ranked"}
+        How effects are added: route, candidates, most effects, threshold (:class:`.search.Search`).
     start : dict, optional
-        Parameters [SI] of ``model`` to refit the baseline from (e.g. its optimum
-        on the same record at another rate, :func:`.extend.fit_at`) instead of
-        a search from scratch; needs ``model``.
-    candidates : tuple of str, optional
-        Effects tried (None: every applicable one).
+        Parameters [SI] of ``model`` to refit the baseline from (its optimum elsewhere,
+        :func:`.extend.fit_at`) instead of a search from scratch; needs ``model``.
 
     Returns
     -------
@@ -163,31 +150,23 @@ def diagnose(
     t0 = _time.perf_counter()
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
-    if search not in ("forward", "ranked"):
-        raise ValueError(f"search must be 'forward' or 'ranked', got {search!r}")
+    search = Search(route=search) if isinstance(search, str) else search
     base, baselines = _baseline(record, model, settings, say, noise, start)
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
-    if search == "forward":
-        selected, rounds = forward_select(record, base, threshold=threshold, max_effects=max_effects, seed=seed,
-                                          progress=say, executor=executor, candidates=candidates)
-    else:
-        selected, ranking, _ = ranked_select(record, base, candidates=candidates, threshold=threshold,
-                                             max_effects=max_effects, seed=seed, progress=say, executor=executor)
-        rounds = [ranking]
+    selected, rounds = search.run(record, base, seed=seed, progress=say, executor=executor)
     ext = selected[-1].fit if selected else base
     after = residual_views(record, ext.predicted) if selected else before
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
     validation = _validate(base, ext, validate, record) if validate is not None else None
     out = _report(record, base, ext, selected, rounds, validation, baselines)
-    out.update(_unexplained(record, before, after, [c.name for c in selected]), threshold=threshold, seed=seed,
+    out.update(_unexplained(record, before, after, [c.name for c in selected]), seed=seed, threshold=search.threshold,
                residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
-    out["terms"] = _search(record, ext, out["verdict"] if terms is None else terms, seed, threshold, say)
-    if out_dir is not None:
-        out["wall_s"] = round(_time.perf_counter() - t0, 2)
-        out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
+    out["terms"] = _search(record, ext, out["verdict"] if terms is None else terms, seed, search.threshold, say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
-    if out_dir is not None:
+    if out_dir is not None:  # the report states the time to here; the JSON the time with the report
+        out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
+        out["wall_s"] = round(_time.perf_counter() - t0, 2)
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return out
 

@@ -10,6 +10,7 @@ Nothing here computes a result: figures show what the engines already stored.
 from __future__ import annotations
 
 from pathlib import Path
+from textwrap import fill
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -57,22 +58,32 @@ def hysteresis(x: np.ndarray, curves: dict[str, np.ndarray], *, title: str = "",
     return fig
 
 
+#: Longest legend label kept inside a panel [characters].
+LEGEND_INSIDE = 40
+
+
 def time_series(t: np.ndarray, panels: dict[str, dict[str, np.ndarray]], *, title: str = "",
                 window: tuple[float, float] | None = None, colors: dict[str, str] | None = None) -> Figure:
     """Stacked panels of time series: ``panels[ylabel][label] = values``.
 
     ``colors`` (label → matplotlib colour) keeps one series the same colour in every panel.
     """
-    fig, axes = subplots(len(panels), 1, figsize=(8, 2.1 * len(panels)), sharex=True, squeeze=False)
+    # long labels (an extended model's name) go beside the panels, where they hide no data
+    beside = any(len(label) > LEGEND_INSIDE for series in panels.values() for label in series)
+    fig, axes = subplots(len(panels), 1, figsize=(11 if beside else 8, 2.1 * len(panels)), sharex=True,
+                         squeeze=False)
     t = np.asarray(t)
     sl = slice(None) if window is None else (t >= window[0]) & (t <= window[1])
     for ax, (ylabel, series) in zip(axes[:, 0], panels.items()):
         for i, (label, y) in enumerate(series.items()):
-            ax.plot(t[sl], np.asarray(y)[sl], lw=0.8, label=label, alpha=1.0 if i == 0 else 0.85,
+            ax.plot(t[sl], np.asarray(y)[sl], lw=0.8, label=fill(label, 45), alpha=1.0 if i == 0 else 0.85,
                     color=(colors or {}).get(label))
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
+        if beside:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        else:
+            ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].set_title(title)
     fig.tight_layout()
@@ -166,9 +177,10 @@ def command_loops(v: np.ndarray, curves: dict[str, np.ndarray], command: np.ndar
     for ax, (label, f) in zip(axes[0], curves.items()):
         art = ax.scatter(v, np.asarray(f, float), c=command, s=2, cmap="viridis", rasterized=True)
         ax.set_xlabel(xlabel)
-        ax.set_title(label, fontsize=9)
+        ax.set_title(fill(label, 34), fontsize=8)
         ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel("force [N]")
+    fig.subplots_adjust(top=0.74)  # room for the title over the panels' wrapped titles (before the colour bar)
     if art is not None:
         fig.colorbar(art, ax=list(axes[0]), label="command")
     fig.suptitle(title)

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from bayes_mr.diagnosis import THRESHOLD, diagnose
+from bayes_mr.diagnosis import THRESHOLD, Search, diagnose
 from bayes_mr.diagnosis.inflation import design_effect_of
 from bayes_mr.diagnosis.residuals import envelope, lag_of, ljung_box
 from bayes_mr.stats import integrated_time
@@ -245,7 +245,7 @@ def test_a_named_extension_reaches_its_optimum():
     extension's global restart (differential evolution over every parameter) must reach that basin."""
     rec = simulated_record("structure", "dahl", {"small_amplitude_regime": {"r_s": 0.3, "x_s": 3e-4}}, seed=3,
                            signal="amp")
-    out = diagnose(rec, "dahl", progress=False, max_effects=1)
+    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1))
     assert out["cause"] == "small_amplitude_regime"
     restart = out["selection"][0]["restart"]
     assert restart["improved"] and restart["cost_after"] < 0.5 * restart["cost_before"]
@@ -303,7 +303,7 @@ def test_packaged_record_segment():
     from bayes_mr.data import load_packaged
 
     rec = load_packaged().isel(time=slice(0, 9000))
-    out = diagnose(rec, "dahl", progress=False, max_effects=1)  # a smoke test: one round is the whole route
+    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1))  # a smoke test: one round is the whole route
     _check_structure(out)
 
 
