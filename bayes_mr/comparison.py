@@ -60,6 +60,17 @@ ROUTES = (("mcmc", "ti"), ("lsq", "laplace"))
 SELECT_ON = "calibrated"
 
 
+def row_of(rows: list[dict], model: str | None, engine: str) -> dict | None:
+    """The row of ``model`` × ``engine`` that did not fail (None if none)."""
+    return next((r for r in rows if r["model"] == model and r["engine"] == engine and "error" not in r), None)
+
+
+def simulating_point(row: dict) -> dict[str, float]:
+    """A row's parameters [SI] that simulate: its ``point`` (optimum or best draw) when it has one, else its
+    ``params`` (issue 14: a sloppy model's posterior mean need not simulate)."""
+    return row.get("point") or row["params"]
+
+
 def selection_route(rows: list[dict], models: Sequence[str]) -> tuple[str | None, str | None]:
     """The engine whose evidence every model has (first of :data:`ROUTES`), and its route name.
 

@@ -43,7 +43,7 @@ import numpy as np
 import xarray as xr
 
 from . import results
-from .comparison import choose, compare, table
+from .comparison import choose, compare, row_of, simulating_point, table
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.noise_floor import noise_floor, with_noise_floor
@@ -305,7 +305,7 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
     from .diagnosis import Search, diagnose
     from .diagnosis.extend import CANDIDATES
 
-    row = next((r for r in rows if r["model"] == model and r["engine"] == "lsq" and "error" not in r), None)
+    row = row_of(rows, model, "lsq")
     if row is None:
         return {model: {"error": f"{model} has no least-squares fit to start the diagnosis from"}}
     _, a_hi, b_hi, _ = prepare(replace(budget, fs=budget.diagnose_fs or budget.fs), record)
@@ -314,10 +314,9 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
     say(f"diagnosing {model} on {window.sizes['time'] / float(a_hi.attrs['fs']):.1f} s of part A at "
         f"{float(a_hi.attrs['fs']):.0f} Hz (from its least-squares optimum)")
     try:
-        out = diagnose(window, model, start=row.get("point") or row["params"],
+        out = diagnose(window, model, start=simulating_point(row),
                        search=Search("ranked", candidates=CANDIDATES, max_effects=5), validate=b_hi, seed=seed,
-                       progress=say,
-                       noise=budget.noise, out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
+                       progress=say, noise=budget.noise, out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
     except (RuntimeError, ValueError) as exc:
         out = {"error": str(exc)}
     return {model: out, "_part_b": b_hi}

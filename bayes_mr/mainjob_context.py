@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import xarray as xr
 
-from .comparison import calibrated_evidence, compare
+from .comparison import calibrated_evidence, compare, row_of
 from .identify import predict
 from .models import get_model
 from .scores import score
@@ -79,7 +79,7 @@ def published_spencer(part_a, part_b, rows: list[dict]) -> dict:
             out[label] = {"force_nrmse": s["force_nrmse"], "mse": s["mse"], "force_errors": s["force_errors"]}
         except ValueError as exc:
             out[label] = {"error": str(exc)}
-    ident = next((r for r in rows if r["model"] == "spencer" and r["engine"] == "lsq" and "error" not in r), None)
+    ident = row_of(rows, "spencer", "lsq")
     if ident is not None:
         out["identified"] = {"engine": "lsq", "params": ident["params"], "params_sd": ident["params_sd"]}
     return out

@@ -314,9 +314,15 @@ def screen_one(record: xr.Dataset, base: Fit, effect: Effect, *, seed: int = 0) 
         ext, runs = refit(lik, starts, base.result.sigma)
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         return Candidate(effect.name, effect, None, -math.inf, error=str(exc))
+    return scored(base, ext, effect, runs=runs)
+
+
+def scored(base: Fit, ext: Fit, effect: Effect, **extra) -> Candidate:
+    """``ext`` = base + effect as a :class:`Candidate`: its score (:func:`score`), evidence gain and MSE ratio
+    against ``base``; ``extra`` sets the other fields (``runs``, ``restart``)."""
     s, kappa, dll, occam = score(base, ext, effect)
     return Candidate(effect.name, effect, ext, s, kappa, dll, occam,
-                     ext.result.log_evidence - base.result.log_evidence, ext.mse / base.mse, runs=runs)
+                     ext.result.log_evidence - base.result.log_evidence, ext.mse / base.mse, **extra)
 
 
 #: Most whole-sample lags the delay screen tries.

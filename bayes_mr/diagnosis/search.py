@@ -16,7 +16,7 @@ import xarray as xr
 
 from ..models import EFFECTS
 from .fits import Fit, global_refit
-from .screen import THRESHOLD, Candidate, applicable, passes, score, screen, screen_one
+from .screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
 
 
 @dataclass(frozen=True)
@@ -87,10 +87,7 @@ def restarted(base: Fit, cand: Candidate, *, seed: int = 0) -> Candidate:
     fit, info = global_refit(cand.fit, [p.name for p in cand.effect.params], seed=seed)
     if fit is cand.fit:
         return replace(cand, restart=info)
-    s, kappa, dll, occam = score(base, fit, cand.effect)
-    return replace(cand, fit=fit, score=s, kappa=kappa, delta_loglik=dll, occam=occam,
-                   delta_log_evidence=fit.result.log_evidence - base.result.log_evidence,
-                   mse_ratio=fit.mse / base.mse, restart=info)
+    return scored(base, fit, cand.effect, runs=cand.runs, restart=info)
 
 
 def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,

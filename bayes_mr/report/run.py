@@ -13,14 +13,10 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from ..comparison import row_of as _row, simulating_point
 from ..identify import predict
 from .figures import binned, command_loops, hysteresis, save, time_series
 from .markdown import fmt, markdown_table
-
-
-def _row(rows: list[dict], model: str | None, engine: str) -> dict | None:
-    """The row of ``model`` × ``engine`` that did not fail (None if none)."""
-    return next((r for r in rows if r["model"] == model and r["engine"] == engine and "error" not in r), None)
 
 
 def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: str | None, best: dict | None,
@@ -61,11 +57,12 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
         part_b, d = diagnosed
         curves = {"measured": part_b["force"].values}
         fs = float(part_b.attrs["fs"])
-        fits = {d["extended"]["model"]: ("extended on A", d["extended"]),  # one curve when nothing was added
-                d["baseline"]["model"]: ("selected, refitted on A", d["baseline"])}
-        for model, (what, fit) in sorted(fits.items(), key=lambda kv: kv[1][1] is d["baseline"]):
+        drawn = [("extended on A", d["extended"])] if d["effects"] else []  # nothing added: one curve
+        drawn.append(("selected, refitted on A", d["baseline"]))
+        for what, fit in drawn:
             try:
-                curves[f"{model} ({what} at {fs:.0f} Hz)"] = predict(model, part_b, fit["params"])["force"]
+                label = f"{fit['model']} ({what} at {fs:.0f} Hz)"
+                curves[label] = predict(fit["model"], part_b, fit["params"])["force"]
             except ValueError:
                 pass
     # without a diagnosis: the selected model as the comparison fitted it, and the best on B beside it
@@ -77,8 +74,7 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
                      (f"{best['model']} ({best['engine']}, best on B)" if best else "", best)):
         if r is not None and label not in curves:
             try:
-                # the point that simulates (issue 14: a sloppy model's posterior mean need not)
-                curves[label] = predict(r["model"], part_b, r.get("point") or r["params"])["force"]
+                curves[label] = predict(r["model"], part_b, simulating_point(r))["force"]
             except ValueError:
                 pass
     try:
