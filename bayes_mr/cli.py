@@ -247,7 +247,10 @@ def cmd_diagnose(args) -> int:
 def cmd_run(args) -> int:
     from .mainjob import run
 
-    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, noise=args.noise)
+    record = _read(args.record, args) if args.record else None
+    other = _read(args.validate, args) if args.validate else None
+    summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, noise=args.noise,
+                  record=record, validate=other)
     print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)
     if args.json:
         _write_json(summary, args.json)

@@ -12,6 +12,13 @@ import argparse
 def _common_data_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mass", type=float, help="storey mass [kg] (structure tests; or a netCDF 'mass' attribute); "
                                               "a forced test's known mass (else its parameter m is estimated)")
+    _reading_flags(p)
+    p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")
+    _input_interp_flag(p)
+
+
+def _reading_flags(p: argparse.ArgumentParser) -> None:
+    """How a record's file is read: units, column names, quality control."""
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT",
                    help="unit of a column whose header has none, e.g. displacement=cm (cm, mm, g, kN, …)")
     p.add_argument("--columns", action="append", metavar="CHANNEL=NAME,...",
@@ -19,8 +26,6 @@ def _common_data_flags(p: argparse.ArgumentParser) -> None:
                         "e.g. time=t,displacement=D,force=F")
     p.add_argument("--no-quality", action="store_true",
                    help="do not mask clipped, spiky or disturbed samples (quality control is on by default)")
-    p.add_argument("--trim", action="store_true", help="trim the record to its excited part (thesis practice)")
-    _input_interp_flag(p)
 
 
 def _input_interp_flag(p: argparse.ArgumentParser) -> None:
@@ -171,6 +176,12 @@ def _job_parsers(sub) -> None:
                                    "tables, netCDF fits and figures under OUT, nothing else.")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results)")
     p.add_argument("--quick", action="store_true", help="a minute-long pass on a short window")
+    p.add_argument("--record", metavar="DATA",
+                   help="another device test of an MR damper instead of the packaged record (.csv, .csv.gz, .nc)")
+    p.add_argument("--validate", metavar="DATA2",
+                   help="a second test of the same damper, held out whole: every fit and the diagnosis's baseline "
+                        "and extended model predict it (trimmed and decimated as the record is)")
+    _reading_flags(p)
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--json", metavar="OUT.json", help="also write the summary here")
     p.add_argument("--noise", choices=("iid", "ar"), default=None,

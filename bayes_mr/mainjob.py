@@ -24,6 +24,10 @@ command voltage, measured force):
    identifies the best of the thesis's four forms (by the same evidence) from
    displacement and acceleration only, and the damper force it implies is
    compared with the measured force.
+6. **A second record** of the same damper (``run --validate DATA2``), when
+   given: prepared as part B was (:mod:`bayes_mr.mainjob_records`), held
+   out whole, predicted by every fit and by the diagnosis's baseline and
+   extended model.
 
 Everything is written to ``out_dir``: ``report.md`` with figures
 (:mod:`bayes_mr.report.run`), tables as CSV, every fit as netCDF and
@@ -34,22 +38,18 @@ touches the README).
 
 from __future__ import annotations
 
-import json
 import time as _time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
 import xarray as xr
 
 from . import results
 from .comparison import choose, compare, row_of, simulating_point, table
-from .data import load_packaged, trim_excited
-from .data.derive import decimate_record
-from .data.noise_floor import noise_floor, with_noise_floor
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
 from .identify import UKF, Emcee, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
+from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -138,50 +138,6 @@ FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=5,
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
                mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
                evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1))
-
-
-def prepare(budget: Budget, record: xr.Dataset | None = None) -> tuple[xr.Dataset, xr.Dataset, xr.Dataset, dict]:
-    """Quality-controlled, trimmed, decimated record and its parts A and B.
-
-    Returns
-    -------
-    whole, part_a, part_b : xarray.Dataset
-    info : dict
-        What was done: masked samples, trim window, decimation factor, sizes.
-    """
-    rec = load_packaged() if record is None else record
-    trimmed, trim = trim_excited(rec)
-    factor = max(1, int(round(float(trimmed.attrs["fs"]) / budget.fs)))
-    decimated = decimate_record(trimmed, factor) if factor > 1 else trimmed
-    if not any(k.startswith("noise_sd_") for k in rec.attrs):
-        # the noise floor of the whole record at the fitted rate, before trimming removes its quiet
-        # start and end: a differencing estimate on the trimmed record sees the signal's curvature
-        # (the packaged damper at 250 Hz: force 130 N, against 1.0 N in its quiet tail)
-        decimated = with_noise_floor(decimated, noise_floor(decimate_record(rec, factor) if factor > 1 else rec))
-    rec = decimated
-    if budget.input_interp is not None:
-        rec.attrs["input_interp"] = budget.input_interp  # every fit and prediction reads the record's attribute
-    if budget.duration_s is not None:
-        rec = rec.isel(time=slice(0, int(budget.duration_s * float(rec.attrs["fs"]))))
-    n = rec.sizes["time"]
-    cut = int(budget.train_fraction * n)
-    part_a = rec.isel(time=slice(0, cut))
-    part_b = rec.isel(time=slice(cut, None))
-    # every simulation starts from rest at the first sample: B's clock restarts too
-    part_b = part_b.assign_coords(time=part_b["time"].values - float(part_b["time"].values[0]))
-    part_a.attrs = {**rec.attrs, "source": f"{rec.attrs.get('source', 'record')} part A"}
-    part_b.attrs = {**rec.attrs, "source": f"{rec.attrs.get('source', 'record')} part B"}
-    info = {
-        "source": str(rec.attrs.get("source", "")),
-        "masked": int((~rec["valid"].values.astype(bool)).sum()),
-        "trim": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in trim.items()},
-        "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n), "input_interp": budget.input_interp,
-        "duration_s": float(n / rec.attrs["fs"]),
-        "part_a_s": float(cut / rec.attrs["fs"]), "part_b_s": float((n - cut) / rec.attrs["fs"]),
-        "noise_sd": {k[len("noise_sd_"):]: float(v) for k, v in rec.attrs.items() if k.startswith("noise_sd_")},
-        "noise_floor": json.loads(rec.attrs.get("noise_floor", "{}")),
-    }
-    return rec, part_a, part_b, info
 
 
 def _engines_for(form: str, budget: Budget, kind: str) -> list[str]:
@@ -316,7 +272,7 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
     try:
         out = diagnose(window, model, start=simulating_point(row),
                        search=Search("ranked", candidates=CANDIDATES, max_effects=5), validate=b_hi, seed=seed,
-                       progress=say, noise=budget.noise, out_dir=out_dir / f"diagnose_{model.replace('+', '_')}")
+                       progress=say, noise=budget.noise, out_dir=diagnosis_dir(out_dir, model))
     except (RuntimeError, ValueError) as exc:
         out = {"error": str(exc)}
     return {model: out, "_part_b": b_hi}
@@ -329,6 +285,38 @@ def _strip(d):
     if isinstance(d, list):
         return [_strip(v) for v in d]
     return d
+
+
+def _tables(comp: dict, part_a: xr.Dataset, part_b: xr.Dataset, out_dir: Path):
+    """The comparison's table and Spencer (1997)'s published-against-identified table, both also as CSV.
+
+    Returns
+    -------
+    tab : pandas.DataFrame
+    spencer : dict
+        :func:`~bayes_mr.mainjob_context.published_spencer`.
+    params : pandas.DataFrame
+    """
+    tab = table(comp)
+    tab.to_csv(out_dir / "compare.csv", index=False)
+    spencer = published_spencer(part_a, part_b, comp["rows"])
+    params = spencer_table(spencer)
+    params.to_csv(out_dir / "spencer_parameters.csv", index=False)
+    return tab, spencer, params
+
+
+def _comparison_summary(comp: dict, budget: Budget, info: dict, sensitivity: dict, best: dict | None) -> dict:
+    """The keys of ``summary.json`` that the comparison fills (budget, record, rows, selection, noise models)."""
+    return {
+        "budget": {k: (v if not isinstance(v, MCMCSettings) else asdict(v)) for k, v in asdict(budget).items()},
+        "record": info,
+        "rows": comp["rows"], "selected": comp["selected"], "bayes_factors": comp["bayes_factors"],
+        "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
+        **{k: comp[k] for k in SELECTION_KEYS if k in comp},
+        "noise": budget.noise, "noise_sensitivity": sensitivity,
+        "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
+                                                     "force_nrmse": best["validation"]["force_nrmse"]},
+    }
 
 
 def _write(summary: dict, out_dir: Path, tab, params, say) -> dict:
@@ -349,6 +337,7 @@ def _timed(timing: dict[str, float], stage: str, fn, *args, **kwargs):
 
 def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, progress=True,
         budget: Budget | None = None, record: xr.Dataset | None = None, noise: str | None = None,
+        validate: xr.Dataset | None = None,
         stages: tuple[str, ...] = ("compare", "spencer", "diagnose", "shake_table")) -> dict:
     """The main job. Returns the summary written to ``out_dir/summary.json``.
 
@@ -366,6 +355,12 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
         Overrides ``quick``.
     record : xarray.Dataset, optional
         A device test to use instead of the packaged NEES record.
+    validate : xarray.Dataset, optional
+        A second test of the same damper (issue 15 item 4). It is trimmed and decimated as the record is and
+        held out whole: every fit of the comparison predicts it, and so do the diagnosis's baseline and
+        extended model at the diagnosis's rate (``summary.json``'s ``second_record``). Checked before the
+        comparison starts: a record of another kind or without the channels the fits read stops the job
+        at once.
     noise : {"iid", "ar"}, optional
         Residual model of the comparison (default: the budget's, ``iid``);
         the other one is fitted by least squares beside it
@@ -387,6 +382,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     say("preparing the record (quality, trim, decimate, split)")
     whole, part_a, part_b, info = prepare(budget, record)
     say(f"{info['samples']} samples at {info['fs']:.1f} Hz; A {info['part_a_s']:.1f} s, B {info['part_b_s']:.1f} s")
+    other = None if validate is None else prepare_other(budget, validate, part_a)
     timing["prepare"] = _time.perf_counter() - t0
 
     comp = _timed(timing, "compare", compare_forms, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
@@ -394,18 +390,16 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     say(f"selected by {comp.get('selected_by') or comp['evidence_route']}: {selected}")
     sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget.forms, budget.noise,
                          comp["rows"], seed=seed, say=say)
-    tab = table(comp)
-    tab.to_csv(out_dir / "compare.csv", index=False)
-
-    spencer = published_spencer(part_a, part_b, comp["rows"])
-    params = spencer_table(spencer)
-    params.to_csv(out_dir / "spencer_parameters.csv", index=False)
-
+    tab, spencer, params = _tables(comp, part_a, part_b, out_dir)
     thesis_form = _best_thesis_form(comp)
     diag: dict[str, dict] = {}
     if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
         diag = _timed(timing, "diagnose", diagnose_selected, record, selected, budget, rows=comp["rows"],
                       seed=seed, out_dir=out_dir, say=say)
+    second = None
+    if other is not None:
+        second = _timed(timing, "second_record", second_record, validate, other, comp, diag, budget, like=part_a,
+                        out_dir=out_dir, say=say)
     vst = None
     if "shake_table" in stages and thesis_form is not None:
         vst = _timed(timing, "shake_table", shake_table, part_a, part_b, thesis_form, budget, seed=seed,
@@ -414,15 +408,8 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     best = _best_by_validation(comp["rows"])
     figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst, diag)
     summary = {
-        "budget": {k: (v if not isinstance(v, MCMCSettings) else asdict(v)) for k, v in asdict(budget).items()},
-        "record": info,
-        "rows": comp["rows"], "selected": selected, "bayes_factors": comp["bayes_factors"],
-        "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
-        **{k: comp[k] for k in SELECTION_KEYS if k in comp},
-        "noise": budget.noise, "noise_sensitivity": sensitivity,
-        "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
-                                                     "force_nrmse": best["validation"]["force_nrmse"]},
-        "spencer_1997": spencer, "diagnose": diag, "shake_table": vst, "figures": figs,
+        **_comparison_summary(comp, budget, info, sensitivity, best),
+        "spencer_1997": spencer, "diagnose": diag, "second_record": second, "shake_table": vst, "figures": figs,
         "stages_s": timing, "seed": seed, "full_job": full_job,
     }
     summary["wall_s"] = _time.perf_counter() - t0

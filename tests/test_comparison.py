@@ -102,11 +102,22 @@ def test_diagnose_cli_names_the_hidden_offset(tmp_path, device_csv):
     assert (tmp_path / "d" / "diagnose.md").exists()
 
 
+def _later_part_of_the_packaged_record(path, start_s: float = 14.0):
+    """The packaged record from ``start_s`` on, as a file: a second test of the same damper for the main job."""
+    from bayes_mr.data import load_packaged, write_record
+
+    rec = load_packaged()
+    later = rec.isel(time=slice(int(start_s * float(rec.attrs["fs"])), None))
+    return write_record(later.assign_coords(time=later["time"].values - float(later["time"].values[0])), path)
+
+
 def test_run_quick_end_to_end(tmp_path):
-    """``bayes-mr run --quick`` on the packaged record writes the report, the tables and the fits."""
+    """``bayes-mr run --quick`` on the packaged record writes the report, the tables and the fits; with
+    ``--validate`` a second record of the damper is predicted by every fit and by the diagnosis's models."""
     out = tmp_path / "results"
+    second = _later_part_of_the_packaged_record(tmp_path / "second.csv")
     assert main(["run", "--quick", "--out", str(out), "--no-readme", "--quiet", "--json",
-                 str(tmp_path / "s.json")]) == 0
+                 str(tmp_path / "s.json"), "--validate", str(second)]) == 0
     s = json.loads((tmp_path / "s.json").read_text())
     assert s["selected"] in ("dahl", "lugre")
     nrmse = [r["validation"]["force_nrmse"] for r in s["rows"] if "validation" in r]
@@ -140,6 +151,27 @@ def test_run_quick_end_to_end(tmp_path):
         assert d["gain"]["mse_ratio"] < 1
     assert d["unexplained_ratio"] > 0 and f"Diagnosis of {s['selected']}" in text
     assert (out / f"diagnose_{s['selected']}" / "extended.nc").exists()
+    # issue 15 item 4: the second record, prepared as part B was and never fitted
+    sr = s["second_record"]
+    assert sr["record"]["fs"] == pytest.approx(s["record"]["fs"]) and sr["record"]["duration_s"] > 1.0
+    fitted = {(r["model"], r["engine"]) for r in s["rows"] if "error" not in r}
+    assert {(r["model"], r["engine"]) for r in sr["rows"]} == fitted
+    assert all(0 < r["force_nrmse"] < 1 for r in sr["rows"] if "error" not in r)
+    sd = sr["diagnosis"]
+    assert sd["fs"] == pytest.approx(d["record"]["fs"]) and sd["extended_model"] == d["extended"]["model"]
+    assert 0 < sd["baseline_force_nrmse"] < 1 and 0 < sd["extended_force_nrmse"] < 1
+    assert "Second record of the same damper" in text and (out / "force_second_record.png").exists()
+
+
+def test_run_refuses_a_second_record_of_another_kind_before_fitting(tmp_path, structure_record, capsys):
+    """A structure test given as the damper's second record stops the job at once, naming the problem."""
+    from bayes_mr.data import write_record
+
+    rec, _ = structure_record("dahl", {}, n=500)
+    path = write_record(rec, tmp_path / "structure.csv")
+    assert main(["run", "--quick", "--out", str(tmp_path / "r"), "--no-readme", "--quiet",
+                 "--validate", str(path)]) == 2
+    assert "structure test" in capsys.readouterr().err and not (tmp_path / "r" / "fits").exists()
 
 
 def test_selection_route_names_the_route_the_evidence_came_by():

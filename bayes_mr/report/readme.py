@@ -14,7 +14,8 @@ from pathlib import Path
 from .run import headline
 
 #: The run's figures shown in the README, in order (keys of :func:`readme_figures`).
-RUN_FIGURES = ("force_b", "force_velocity_b", "residual_velocity_b", "diagnose_hysteresis", "shake_table")
+RUN_FIGURES = ("force_b", "force_velocity_b", "residual_velocity_b", "force_second", "diagnose_hysteresis",
+               "shake_table")
 
 
 def readme_figures(summary: dict) -> dict[str, str]:

@@ -42,7 +42,8 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     diag : dict, optional
         :func:`bayes_mr.mainjob.diagnose_selected` (``{model: diagnose JSON, "_part_b": part B at its rate}``).
         When the diagnosis ran, the part-B figures are drawn at its rate with the extended model first (the
-        package's best physical model, fitted on A), then the selected model as refitted there.
+        package's best physical model, fitted on A), then the selected model as refitted there; with a second
+        record of the same damper (``"_other"``, at the diagnosis's rate) the same four figures are drawn for it.
 
     Returns
     -------
@@ -55,16 +56,7 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     diagnosed = _diagnosed(diag)
     if diagnosed is not None:
         part_b, d = diagnosed
-        curves = {"measured": part_b["force"].values}
-        fs = float(part_b.attrs["fs"])
-        drawn = [("extended on A", d["extended"])] if d["effects"] else []  # nothing added: one curve
-        drawn.append(("selected, refitted on A", d["baseline"]))
-        for what, fit in drawn:
-            try:
-                label = f"{fit['model']} ({what} at {fs:.0f} Hz)"
-                curves[label] = predict(fit["model"], part_b, fit["params"])["force"]
-            except ValueError:
-                pass
+        curves = _diagnosis_curves(part_b, d)
     # without a diagnosis: the selected model as the comparison fitted it, and the best on B beside it
     sel = _row(rows, selected, "lsq") if diagnosed is None else None
     best = best if diagnosed is None else None
@@ -77,11 +69,14 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
                 curves[label] = predict(r["model"], part_b, simulating_point(r))["force"]
             except ValueError:
                 pass
-    try:
-        curves["Spencer 1997 published"] = predict("spencer", part_b, spencer["params"])["force"]
-    except ValueError:
-        pass
-    figs.update(_part_b_figures(out_dir, part_b, curves))
+    _add_published(curves, part_b, spencer)
+    figs.update(_prediction_figures(out_dir, part_b, curves))
+    if diagnosed is not None and "_other" in diag:  # the second record of the same damper, never fitted
+        other = diag["_other"]
+        curves = _diagnosis_curves(other, diagnosed[1])
+        _add_published(curves, other, spencer)
+        figs.update(_prediction_figures(out_dir, other, curves, key="second", stem="second_record",
+                                        what="second record"))
     if vst is not None and "_vst_b" in vst:
         window = (0.0, min(4.0, float(t[-1])))
         v = vst["_vst_b"]
@@ -96,6 +91,29 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     return figs
 
 
+def _diagnosis_curves(rec: xr.Dataset, d: dict) -> dict[str, np.ndarray]:
+    """Measured force and the diagnosis's predictions of ``rec`` [N]: the extended model first (when effects were
+    added), then the selected model as refitted; a prediction that diverges is left out."""
+    curves = {"measured": rec["force"].values}
+    fs = float(rec.attrs["fs"])
+    drawn = [("extended on A", d["extended"])] if d["effects"] else []  # nothing added: one curve
+    drawn.append(("selected, refitted on A", d["baseline"]))
+    for what, fit in drawn:
+        try:
+            curves[f"{fit['model']} ({what} at {fs:.0f} Hz)"] = predict(fit["model"], rec, fit["params"])["force"]
+        except ValueError:
+            pass
+    return curves
+
+
+def _add_published(curves: dict[str, np.ndarray], rec: xr.Dataset, spencer: dict) -> None:
+    """Spencer et al. (1997)'s published parameters' prediction of ``rec``, added last (unless it diverges)."""
+    try:
+        curves["Spencer 1997 published"] = predict("spencer", rec, spencer["params"])["force"]
+    except ValueError:
+        pass
+
+
 def _diagnosed(diag: dict | None) -> tuple[xr.Dataset, dict] | None:
     """(part B at the diagnosis's rate, the diagnosis) when the main job's diagnosis ran and succeeded."""
     if not diag or "_part_b" not in diag:
@@ -108,13 +126,15 @@ def _diagnosed(diag: dict | None) -> tuple[xr.Dataset, dict] | None:
 WINDOW_S = 0.5
 
 
-def _part_b_figures(out_dir: Path, part_b: xr.Dataset, curves: dict[str, np.ndarray]) -> dict[str, str]:
-    """Part B as a reader checks a prediction: a 0.5 s window with the residuals under it, the loops, the
-    force–velocity plane coloured by the command, and the residual of each prediction binned by velocity.
+def _prediction_figures(out_dir: Path, part_b: xr.Dataset, curves: dict[str, np.ndarray], *, key: str = "b",
+                        stem: str = "part_b", what: str = "part B") -> dict[str, str]:
+    """A held-out record as a reader checks a prediction: a 0.5 s window with the residuals under it, the loops,
+    the force–velocity plane coloured by the command, and the residual of the first prediction binned by velocity.
 
     ``curves`` holds the measured force first, then each prediction [N]. The window is the one where the
     first prediction misses most (a 0.5 s moving RMS of its residual), so the figure shows the problem,
-    not a quiet stretch.
+    not a quiet stretch. Figure keys end in ``_{key}``, files in ``_{stem}.png``; ``what`` names the record
+    in the titles.
     """
     figs = {}
     t, x = part_b["time"].values, part_b["displacement"].values
@@ -130,24 +150,25 @@ def _part_b_figures(out_dir: Path, part_b: xr.Dataset, curves: dict[str, np.ndar
     window = (float(t[start]), float(t[min(start + n_win, t.size) - 1]))
     panels = {"force [N]": curves, "residual [N]": {k: measured - f for k, f in preds.items()}}
     colors = {k: f"C{i}" for i, k in enumerate(curves)}
-    figs["force_b"] = str(save(time_series(t, panels, window=window, colors=colors,
-                                         title=f"part B (never fitted): damper force, the {WINDOW_S:g} s window "
-                                               "missed most"), out_dir / "force_part_b.png"))
+    figs[f"force_{key}"] = str(save(time_series(t, panels, window=window, colors=colors,
+                                              title=f"{what} (never fitted): damper force, the {WINDOW_S:g} s window "
+                                                    "missed most"), out_dir / f"force_{stem}.png"))
     sl = slice(start, start + n_win)
-    figs["hysteresis_b"] = str(save(hysteresis(x, curves, window=sl, title="part B: force–displacement (same window)"),
-                                  out_dir / "hysteresis_part_b.png"))
+    figs[f"hysteresis_{key}"] = str(save(hysteresis(x, curves, window=sl,
+                                                   title=f"{what}: force–displacement (same window)"),
+                                        out_dir / f"hysteresis_{stem}.png"))
     command = next((part_b[c].values for c in ("voltage", "current") if c in part_b), None)
     if command is not None and "velocity" in part_b:
         first = dict(list(curves.items())[:2])
-        figs["force_velocity_b"] = str(save(command_loops(part_b["velocity"].values, first, command,
-                                                          title="part B: force–velocity, coloured by command"),
-                                          out_dir / "force_velocity_part_b.png"))
+        figs[f"force_velocity_{key}"] = str(save(command_loops(part_b["velocity"].values, first, command,
+                                                               title=f"{what}: force–velocity, coloured by command"),
+                                               out_dir / f"force_velocity_{stem}.png"))
     if preds and "velocity" in part_b:
         label, f = next(iter(preds.items()))
-        figs["residual_velocity_b"] = str(save(binned({"velocity [m/s]": part_b["velocity"].values,
-                                                       "displacement [m]": x}, measured - f,
-                                                      title=f"part B residual of {label} [N]"),
-                                             out_dir / "residual_velocity_part_b.png"))
+        figs[f"residual_velocity_{key}"] = str(save(binned({"velocity [m/s]": part_b["velocity"].values,
+                                                            "displacement [m]": x}, measured - f,
+                                                           title=f"{what} residual of {label} [N]"),
+                                                  out_dir / f"residual_velocity_{stem}.png"))
     return figs
 
 
@@ -244,6 +265,35 @@ def diagnosis_sentence(model: str, d: dict) -> str:
     return head
 
 
+def second_record_sentence(summary: dict) -> str | None:
+    """How the fits of part A predict a second record of the same damper (None when the run had none)."""
+    s = summary.get("second_record")
+    if not s:
+        return None
+    rec, sel = s["record"], summary["selected"]
+    ok = [r for r in s["rows"] if r.get("force_nrmse") is not None]
+    line = (f"Second record of the same damper ({rec['source']}; {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz, "
+            "never fitted): ")
+    sel_row = next((r for r in ok if (r["model"], r["engine"]) == (sel, "lsq")), None)
+    parts = []
+    if sel_row is not None:
+        parts.append(f"the selected model ({sel}, least squares) predicts it with force NRMSE "
+                     f"{fmt(sel_row['force_nrmse'], 3)}")
+    if ok:
+        best = min(ok, key=lambda r: r["force_nrmse"])
+        parts.append(f"the best fit of the comparison on it is {best['model']} ({best['engine']}), "
+                     f"{fmt(best['force_nrmse'], 3)}")
+    failed = [f"{r['model']} ({r['engine']})" for r in s["rows"] if "error" in r]
+    if failed:
+        parts.append(f"{', '.join(failed)} could not predict it")
+    d = s.get("diagnosis")
+    if d:
+        parts.append(f"at {d['fs']:.0f} Hz the diagnosis's {d['baseline_model']} gives "
+                     f"{fmt(d.get('baseline_force_nrmse'), 4)} and its extension {d['extended_model']} "
+                     f"{fmt(d.get('extended_force_nrmse'), 4)}")
+    return line + ("; ".join(parts) or "no fit could predict it") + "."
+
+
 def headline(summary: dict) -> list[str]:
     """The sentences a structural engineer reads first (every number from this run)."""
     rows, sel = summary["rows"], summary["selected"]
@@ -281,6 +331,9 @@ def headline(summary: dict) -> list[str]:
             lines.append(f"Diagnosis of {model} failed: {d['error']}")
             continue
         lines.append(diagnosis_sentence(model, d))
+    second = second_record_sentence(summary)
+    if second:
+        lines.append(second)
     v = summary.get("shake_table")
     if v and "ukf" in v and "error" not in v["ukf"]:
         u = v["ukf"]
@@ -291,6 +344,21 @@ def headline(summary: dict) -> list[str]:
                      f"structure model's force output: {fmt(u.get('hysteretic_nrmse_b'), 3)} on B; "
                      f"{u.get('trained')} UKF runs trained, {u.get('diverged')} diverged).")
     return lines
+
+
+def _second_record_section(summary: dict) -> list[str]:
+    """The report's section on the second record: every fit's prediction of it, and its figures."""
+    s = summary.get("second_record")
+    if not s:
+        return []
+    tab = pd.DataFrame([{"model": r["model"], "engine": r["engine"], "force NRMSE": r.get("force_nrmse"),
+                         "MSE": r.get("mse"), "error": r.get("error", "")} for r in s["rows"]])
+    out = ["## Second record of the same damper (never fitted)", "", second_record_sentence(summary), "",
+           markdown_table(tab.drop(columns=[] if tab["error"].astype(bool).any() else ["error"])), ""]
+    if s.get("diagnosis"):
+        out += ["![force on the second record](force_second_record.png)", "",
+                "![force–velocity by command](force_velocity_second_record.png)", ""]
+    return out
 
 
 def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> str:
@@ -329,6 +397,7 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
                        f"{ranked}.")
             out += ["", f"![residuals]({folder}/residuals_time.png)"]
         out.append("")
+    out += _second_record_section(summary)
     v = summary.get("shake_table")
     if v:
         out += ["## Virtual shake table", "",
