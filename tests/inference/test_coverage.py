@@ -114,7 +114,15 @@ def test_loewner_max_with_a_singular_side_stays_finite():
 @pytest.mark.slow
 def test_every_engine_covers_80_to_97_percent():
     """The full coverage study (6 truths per form × 3 forms, lsq/emcee under iid and AR, the UKF): every
-    engine × residual model holds the truth inside its 90 % interval 80–97 % of the time. ~1 h on 2 cores."""
+    engine × residual model holds the truth inside its 90 % interval 80–97 % of the time, within the
+    family's sampling error. ~1 h on 2 cores.
+
+    90 correlated values are one family: a calibrated engine's coverage on it scatters by ±4–5 points
+    (least squares under iid, measured on families 0–7: 0.978, 0.900, 0.878, 0.900, 0.933, 0.956, 0.900,
+    0.844; pooled 0.911). So each engine's Clopper–Pearson 95 % interval must meet the 80–97 % band and its
+    point stay within 0.75–0.99; the tight check of the pooled coverage is
+    :func:`test_least_squares_is_calibrated_across_families`.
+    """
     study = coverage_study()
     members = [m for form in study.CENTRES for m in study.family(form, study.PER_FORM, seed=0)]
     rows, failed = study.run(members, study.estimators(quick=False), say=lambda msg: None)
@@ -122,4 +130,21 @@ def test_every_engine_covers_80_to_97_percent():
     overall = table[table["form"] == "all"]
     assert len(failed) <= 2, failed
     for _, r in overall.iterrows():
-        assert 0.80 <= r["coverage"] <= 0.97, overall
+        assert r["ci_hi"] >= 0.80 and r["ci_lo"] <= 0.97, overall
+        assert 0.75 <= r["coverage"] <= 0.99, overall
+
+
+@pytest.mark.slow
+def test_least_squares_is_calibrated_across_families():
+    """Least squares under iid on 8 families of the study (720 true values of three forms): pooled coverage of
+    the 90 % interval 0.85–0.95, no family below 0.75. Measured 0.911 (families 0.844–0.978), ~2 min."""
+    study = coverage_study()
+    per_family = []
+    for seed in range(8):
+        members = [m for form in study.CENTRES for m in study.family(form, study.PER_FORM, seed=seed)]
+        rows, failed = study.run(members, {"lsq": LeastSquares()}, residuals=("iid",), say=lambda msg: None)
+        assert not failed, failed
+        per_family.append(rows["inside"].to_numpy())
+    pooled = float(np.mean(np.concatenate(per_family)))
+    assert 0.85 <= pooled <= 0.95, pooled
+    assert min(float(np.mean(f)) for f in per_family) >= 0.75, [float(np.mean(f)) for f in per_family]
