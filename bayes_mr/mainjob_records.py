@@ -189,8 +189,8 @@ def diagnosis_on_other(d: dict, folder: Path, budget: Budget, record: xr.Dataset
     d : dict
         The diagnosis JSON (``baseline``, ``extended``).
     folder : Path
-        Where the diagnosis wrote ``baseline.nc`` and ``extended.nc``: they are scored as
-        ``bayes-mr validate FOLDER/extended.nc DATA2`` scores them.
+        Where the diagnosis wrote ``baseline.nc``, ``extended.nc`` and (when the term search kept a term)
+        ``terms.nc``: they are scored as ``bayes-mr validate FOLDER/extended.nc DATA2`` scores them.
     budget : bayes_mr.mainjob.Budget
         The job's budget; the record is prepared at the diagnosis's rate (``diagnose_fs``).
     record : xarray.Dataset
@@ -201,15 +201,15 @@ def diagnosis_on_other(d: dict, folder: Path, budget: Budget, record: xr.Dataset
     Returns
     -------
     scores : dict
-        ``fs`` [Hz], ``duration_s`` [s], and per model ``baseline_model``/``extended_model``,
-        ``baseline_force_nrmse``/``extended_force_nrmse``, ``baseline_mse``/``extended_mse``
-        (or ``…_error`` when that prediction failed).
+        ``fs`` [Hz], ``duration_s`` [s], and per model (``baseline``, ``extended`` and, with kept terms,
+        ``terms``) ``…_model``, ``…_force_nrmse``, ``…_mse`` (or ``…_error`` when that prediction failed).
     record : xarray.Dataset
         The second record at the diagnosis's rate (for the figures).
     """
     rec, info = prepare_other(replace(budget, fs=budget.diagnose_fs or budget.fs), record, like)
     out = {"fs": info["fs"], "duration_s": info["duration_s"]}
-    for label in ("baseline", "extended"):
+    kept = bool((d.get("terms") or {}).get("kept"))
+    for label in ("baseline", "extended", "terms")[:3 if kept else 2]:
         out[f"{label}_model"] = d[label]["model"]
         try:
             v = validate_fit(results.load_result(folder / f"{label}.nc"), rec)

@@ -161,6 +161,13 @@ def test_run_quick_end_to_end(tmp_path):
     assert sd["fs"] == pytest.approx(d["record"]["fs"]) and sd["extended_model"] == d["extended"]["model"]
     assert 0 < sd["baseline_force_nrmse"] < 1 and 0 < sd["extended_force_nrmse"] < 1
     assert "Second record of the same damper" in text and (out / "force_second_record.png").exists()
+    # what the extended model still leaves: the term library searched beyond the vocabulary, whatever the verdict
+    t = d["terms"]
+    assert t is not None and t["asked"] == "explicitly"
+    if t["kept"]:  # kept only where the evidence and a held-out end of A both improve; B is where it is checked
+        assert 0 < t["validation"]["force_nrmse"] < 1 and 0 < sd["terms_force_nrmse"] < 1
+        assert sd["terms_model"] == t["model"] and (out / f"diagnose_{s['selected']}" / "terms.nc").exists()
+        assert "beyond the vocabulary kept" in text
 
 
 def test_run_refuses_a_second_record_of_another_kind_before_fitting(tmp_path, structure_record, capsys):

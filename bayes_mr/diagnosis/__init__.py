@@ -155,17 +155,17 @@ def diagnose(
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
     selected, rounds = search.run(record, base, seed=seed, progress=say, executor=executor)
-    ext = selected[-1].fit if selected else base
-    after = residual_views(record, ext.predicted) if selected else before
+    ext, after = (selected[-1].fit, residual_views(record, selected[-1].fit.predicted)) if selected else (base, before)
     say(f"named: {', '.join(c.name for c in selected) or NONE}")
-    validation = _validate(base, ext, validate, record) if validate is not None else None
+    validation, validate = _validate(base, ext, validate, record)
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(_unexplained(record, before, after, [c.name for c in selected]), seed=seed, threshold=search.threshold,
                residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
-    out["terms"] = _search(record, ext, out["verdict"] if terms is None else terms, seed, search.threshold, say)
+    out["terms"], term_fit = _search(record, ext, out["verdict"] if terms is None else terms, validate,
+                                     (seed, search.threshold), say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
     if out_dir is not None:  # the report states the time to here; the JSON the time with the report
-        out.update(_write(out, record, base, ext, before, after, rounds, Path(out_dir), seed))
+        out.update(_write(out, record, (base, ext, term_fit), before, after, rounds, Path(out_dir), seed))
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return out
@@ -195,27 +195,44 @@ def _unexplained(record: xr.Dataset, before, after, effects: list[str]) -> dict:
             "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO}
 
 
-def _search(record: xr.Dataset, ext: Fit, ask: bool | str, seed: int, threshold: float, say) -> dict | None:
+def _search(record: xr.Dataset, ext: Fit, ask: bool | str, validate: xr.Dataset | None,
+            seed_threshold: tuple[int, float], say) -> tuple[dict | None, Fit | None]:
     """The term search (:mod:`.terms`) on the final model: ``ask`` True/False, or the verdict (runs on
-    "unexplained by the vocabulary"); None when it does not run."""
+    "unexplained by the vocabulary"); with ``validate``, the kept terms' model predicts it (``validation``).
+
+    Returns
+    -------
+    terms : dict or None
+        The ``terms`` JSON field (None when the search does not run).
+    fit : Fit or None
+        The whole-record fit of the model with the kept terms (None when none is kept).
+    """
     if ask is False or (isinstance(ask, str) and ask != BEYOND):
-        return None
-    found, _ = search_terms(record, ext, seed=seed, threshold=threshold, progress=say)
+        return None, None
+    seed, threshold = seed_threshold
+    found, fit = search_terms(record, ext, seed=seed, threshold=threshold, progress=say)
     found["asked"] = "explicitly" if ask is True else f"verdict '{BEYOND}'"
     say(f"terms kept: {', '.join(found['kept']) or 'none'}")
-    return found
+    if not found["kept"]:
+        return found, None
+    if validate is not None:
+        found["validation"] = {k: _num(v) for k, v in _scores_on(fit, validate).items()}
+    return found, fit
 
 
-def _write(out: dict, record: xr.Dataset, base: Fit, ext: Fit, before, after, rounds, out_dir: Path,
-           seed: int) -> dict:
-    """Report, figures, and ``baseline.nc`` / ``extended.nc`` (InferenceData ``bayes-mr validate`` reads)."""
+def _write(out: dict, record: xr.Dataset, models: tuple[Fit, Fit, Fit | None], before, after, rounds,
+           out_dir: Path, seed: int) -> dict:
+    """Report, figures, and ``baseline.nc`` / ``extended.nc`` / (with kept terms) ``terms.nc``: InferenceData
+    ``bayes-mr validate`` reads. ``models`` is (baseline, extended, the term search's model or None)."""
     from .. import results
     from ..report.diagnose import write_report
 
+    base, ext, term_fit = models
     paths = write_report(out, record, base, ext, before, after, rounds, out_dir)
     fits = {}
-    for label, f in (("baseline", base), ("extended", ext)):
-        fits[label] = str(results.save(inference_data(f, seed=seed), out_dir / f"{label}.nc"))
+    for label, f in (("baseline", base), ("extended", ext), ("terms", term_fit)):
+        if f is not None:
+            fits[label] = str(results.save(inference_data(f, seed=seed), out_dir / f"{label}.nc"))
     return {"figures": {k: str(v) for k, v in paths.items() if k != "report"}, "report": str(paths["report"]),
             "results": fits}
 
@@ -306,8 +323,8 @@ def _causes(rounds: list[list[Candidate]], selected: list[Candidate]) -> list[di
     return rows
 
 
-def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> dict:
-    """Errors of the baseline and the extended model, as fitted, on another record."""
+def _validation_record(validate, record: xr.Dataset) -> xr.Dataset:
+    """The validation record (read when a path), checked to be of ``record``'s kind."""
     if not isinstance(validate, xr.Dataset):
         from ..data import load
 
@@ -315,15 +332,30 @@ def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> dict:
     if validate.attrs["kind"] != record.attrs["kind"]:
         raise ValueError(f"validation record is a {validate.attrs['kind']} test, the record a "
                          f"{record.attrs['kind']} test")
+    return validate
+
+
+def _scores_on(fit: Fit, validate: xr.Dataset) -> dict:
+    """``mse`` and ``force_nrmse`` of ``fit``'s model, as fitted, predicting ``validate`` (inf/None if it
+    diverges; the force NRMSE is null when the record measures no force)."""
+    pred = predict(fit.model, validate, fit.theta_full)
+    scores = score(validate, pred) if pred is not None else {"mse": math.inf, "force_nrmse": None}
+    return {"mse": scores["mse"], "force_nrmse": _num(scores["force_nrmse"])}
+
+
+def _validate(base: Fit, ext: Fit, validate, record: xr.Dataset) -> tuple[dict | None, xr.Dataset | None]:
+    """Errors of the baseline and the extended model, as fitted, on another record (a Dataset or a path, read
+    and checked by :func:`_validation_record`), and that record; (None, None) without one."""
+    if validate is None:
+        return None, None
+    validate = _validation_record(validate, record)
     out = {"source": str(validate.attrs.get("source", "")),
            "masked": int((~validate["valid"].values.astype(bool)).sum())}
     mses = {}
     for label, f in (("baseline", base), ("extended", ext)):
-        pred = predict(f.model, validate, f.theta_full)
-        scores = score(validate, pred) if pred is not None else {"mse": math.inf, "force_nrmse": None}
+        scores = _scores_on(f, validate)
         mses[label] = scores["mse"]
         out[f"{label}_mse"] = _num(mses[label])
-        # null when the record measures no force (a structure test without a load cell)
-        out[f"{label}_force_nrmse"] = _num(scores["force_nrmse"])
+        out[f"{label}_force_nrmse"] = scores["force_nrmse"]
     out["mse_ratio"] = _num(mses["extended"] / mses["baseline"]) if mses["baseline"] > 0 else None
-    return out
+    return out, validate

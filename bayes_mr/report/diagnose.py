@@ -325,6 +325,12 @@ def terms_text(out: dict) -> list[str]:
         lines += [f"Kept: `{t['model']}` (whole record: MSE ratio {fmt(t['mse_ratio'])}, "
                   f"Δ ln Z {fmt(t['delta_log_evidence'])} against `{out['extended']['model']}`)."]
         lines += [f"- {s}" for s in t["sentences"]]
+        v, vt = out.get("validation") or {}, t.get("validation") or {}
+        if vt:
+            lines += ["", f"On the validation record ({v.get('source', '')}): force NRMSE "
+                          f"{fmt(v.get('extended_force_nrmse'))} with `{out['extended']['model']}`, "
+                          f"{fmt(vt.get('force_nrmse'))} with the kept terms (MSE {fmt(v.get('extended_mse'))} → "
+                          f"{fmt(vt.get('mse'))})."]
     else:
         lines.append("No term kept.")
     return lines + [""]

@@ -92,11 +92,14 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
 
 
 def _diagnosis_curves(rec: xr.Dataset, d: dict) -> dict[str, np.ndarray]:
-    """Measured force and the diagnosis's predictions of ``rec`` [N]: the extended model first (when effects were
-    added), then the selected model as refitted; a prediction that diverges is left out."""
+    """Measured force and the diagnosis's predictions of ``rec`` [N]: the model with the terms the term search kept
+    (when it kept any), the extended model (when effects were added), then the selected model as refitted; a
+    prediction that diverges is left out."""
     curves = {"measured": rec["force"].values}
     fs = float(rec.attrs["fs"])
-    drawn = [("extended on A", d["extended"])] if d["effects"] else []  # nothing added: one curve
+    t = d.get("terms") or {}
+    drawn = [("with terms found beyond the vocabulary", t)] if t.get("kept") else []
+    drawn += [("extended on A", d["extended"])] if d["effects"] else []  # nothing added: one curve
     drawn.append(("selected, refitted on A", d["baseline"]))
     for what, fit in drawn:
         try:
@@ -246,6 +249,20 @@ def _floor_sentence(rec: dict) -> str:
     return (" Noise floor" + where + ": " + ", ".join(f"{c} {fmt(v, 3)}" for c, v in sd.items()) + " (SI).")
 
 
+def _terms_clause(t: dict | None, v: dict) -> str:
+    """What the term search beyond the vocabulary kept, and its part-B error ('' when it did not run)."""
+    if not t:
+        return ""
+    if not t.get("kept"):
+        return f" A search of the term library beyond the vocabulary kept nothing ({len(t.get('proposed', []))} tried)."
+    vb = (t.get("validation") or {}).get("force_nrmse")
+    return (f" A search of the term library beyond the vocabulary kept {len(t['kept'])}: "
+            + "; ".join(t.get("sentences") or t["kept"])
+            + f" (MSE ratio on A {fmt(t.get('mse_ratio'), 3)}, Δ ln Z {fmt(t.get('delta_log_evidence'), 4)}"
+            + (f"; part B force NRMSE {fmt(v.get('extended_force_nrmse'), 4)} → {fmt(vb, 4)}" if vb is not None else "")
+            + ").")
+
+
 def diagnosis_sentence(model: str, d: dict) -> str:
     """What the diagnosis of ``model`` added, what it gained on A and on B, and what it still leaves."""
     g, v, rec = d["gain"], d.get("validation") or {}, d["record"]
@@ -260,9 +277,9 @@ def diagnosis_sentence(model: str, d: dict) -> str:
         head += " — no effect passes the calibrated threshold."
     ratio = d.get("unexplained_ratio")
     if ratio is not None:
-        head += (f" What the final model leaves on A is {fmt(ratio, 3)} × the noise floor (worst channel; "
-                 f"{'at the floor' if d.get('at_noise_floor') else 'model error, not noise'}).")
-    return head
+        head += (f" What {'the extended' if d['effects'] else 'the'} model leaves on A is {fmt(ratio, 3)} × the "
+                 f"noise floor (worst channel; {'at the floor' if d.get('at_noise_floor') else 'model error, not noise'}).")
+    return head + _terms_clause(d.get("terms"), v)
 
 
 def second_record_sentence(summary: dict) -> str | None:
@@ -290,7 +307,9 @@ def second_record_sentence(summary: dict) -> str | None:
     if d:
         parts.append(f"at {d['fs']:.0f} Hz the diagnosis's {d['baseline_model']} gives "
                      f"{fmt(d.get('baseline_force_nrmse'), 4)} and its extension {d['extended_model']} "
-                     f"{fmt(d.get('extended_force_nrmse'), 4)}")
+                     f"{fmt(d.get('extended_force_nrmse'), 4)}"
+                     + (f", with the terms found beyond the vocabulary {fmt(d.get('terms_force_nrmse'), 4)}"
+                        if "terms_model" in d else ""))
     return line + ("; ".join(parts) or "no fit could predict it") + "."
 
 
