@@ -158,7 +158,8 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
     p.add_argument("--terms", action=argparse.BooleanOptionalAction, default=None,
                    help="search the library of terms (products of x, xdot, z, u, |.|, sgn) for what the model "
-                        "leaves (default: when the verdict is 'unexplained by the vocabulary')")
+                        "leaves (default: where the model stays above its noise floor, with no effect named or "
+                        "after the named ones)")
     p.add_argument("--search", choices=("forward", "ranked"), default="forward",
                    help="forward (default): re-screen every remaining effect after each one added; ranked: rank "
                         "them once against the baseline and add the passing ones best first, each refitted and "

@@ -127,7 +127,7 @@ def diagnose(
     executor : object, optional
         Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
     terms : bool, optional
-        Search the term library (:mod:`.terms`): always, never, or (None) on "unexplained by the vocabulary".
+        Search the term library: always, never, or (None) where the model stays above its floor (:func:`_asked`).
     search : Search or {"forward", "ranked"}
         How effects are added: route, candidates, most effects, threshold (:class:`.search.Search`).
     start : dict, optional
@@ -161,7 +161,7 @@ def diagnose(
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(_unexplained(record, before, after, [c.name for c in selected]), seed=seed, threshold=search.threshold,
                residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
-    out["terms"], term_fit = _search(record, ext, out["verdict"] if terms is None else terms, validate,
+    out["terms"], term_fit = _search(record, ext, _asked(out) if terms is None else terms, validate,
                                      (seed, search.threshold), say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
     if out_dir is not None:  # the report states the time to here; the JSON the time with the report
@@ -195,10 +195,20 @@ def _unexplained(record: xr.Dataset, before, after, effects: list[str]) -> dict:
             "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO}
 
 
-def _search(record: xr.Dataset, ext: Fit, ask: bool | str, validate: xr.Dataset | None,
+def _asked(out: dict) -> str | None:
+    """Why the term search runs by default, or None: the verdict is "unexplained by the vocabulary", or effects
+    were named and the extended model is still above the noise floor (what they leave is what the library is for)."""
+    if out["verdict"] == BEYOND:
+        return f"verdict '{BEYOND}'"
+    if out["effects"] and not out["at_noise_floor"]:
+        return f"the extended model at {out['unexplained_ratio']:.3g} × the noise floor"
+    return None
+
+
+def _search(record: xr.Dataset, ext: Fit, ask: bool | str | None, validate: xr.Dataset | None,
             seed_threshold: tuple[int, float], say) -> tuple[dict | None, Fit | None]:
-    """The term search (:mod:`.terms`) on the final model: ``ask`` True/False, or the verdict (runs on
-    "unexplained by the vocabulary"); with ``validate``, the kept terms' model predicts it (``validation``).
+    """The term search (:mod:`.terms`) on the final model: ``ask`` True/False, or why it runs by default
+    (:func:`_asked`; None: it does not); with ``validate``, the kept terms' model predicts it (``validation``).
 
     Returns
     -------
@@ -207,11 +217,11 @@ def _search(record: xr.Dataset, ext: Fit, ask: bool | str, validate: xr.Dataset 
     fit : Fit or None
         The whole-record fit of the model with the kept terms (None when none is kept).
     """
-    if ask is False or (isinstance(ask, str) and ask != BEYOND):
+    if ask is False or ask is None:
         return None, None
     seed, threshold = seed_threshold
     found, fit = search_terms(record, ext, seed=seed, threshold=threshold, progress=say)
-    found["asked"] = "explicitly" if ask is True else f"verdict '{BEYOND}'"
+    found["asked"] = "explicitly" if ask is True else ask
     say(f"terms kept: {', '.join(found['kept']) or 'none'}")
     if not found["kept"]:
         return found, None

@@ -111,3 +111,17 @@ def test_diagnose_out_writes_fits_that_validate_scores(tmp_path):
     assert {"window_force", "unexplained"} <= set(diag["figures"])
     assert "What remains unexplained" in (out_dir / "diagnose.md").read_text()
     assert load(paths["test"]).attrs["kind"] == "device"
+
+
+def test_the_term_search_runs_by_default_where_the_model_stays_above_its_floor():
+    """By default the term library is searched where what the model leaves is above the noise floor: with no
+    effect named, or after the named ones (the measured damper: ~80× after four effects); never at the floor."""
+    from bayes_mr.diagnosis import _asked
+
+    above = {"verdict": "explained by inertia", "effects": ["inertia"], "at_noise_floor": False,
+             "unexplained_ratio": 79.3}
+    assert _asked(above) == "the extended model at 79.3 × the noise floor"
+    assert _asked({**above, "at_noise_floor": True, "unexplained_ratio": 1.1}) is None
+    assert _asked({"verdict": BEYOND, "effects": [], "at_noise_floor": False, "unexplained_ratio": 9.0}) == \
+        f"verdict '{BEYOND}'"
+    assert _asked({"verdict": AT_FLOOR, "effects": [], "at_noise_floor": True, "unexplained_ratio": 1.0}) is None
