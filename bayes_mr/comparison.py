@@ -127,12 +127,22 @@ def fit_job(model: str, estimator, record: xr.Dataset, validate: xr.Dataset | No
                 "wall_s": _time.perf_counter() - t0}, None
     row = results.summary_of(idata).to_dict()
     if validate is not None:
-        try:
-            v = validate_fit(idata, validate)
-            row["validation"] = {k: v[k] for k in ("mse", "force_errors", "force_nrmse", "rmse", "masked")}
-        except ValueError as exc:
-            row["validation"] = {"error": str(exc)}
+        row["validation"] = validation_scores(idata, validate)
     return row, idata
+
+
+#: What a fit's prediction of another record reports (:func:`validation_scores`).
+VALIDATION_KEYS = ("mse", "force_errors", "force_nrmse", "rmse", "masked")
+
+
+def validation_scores(idata, record: xr.Dataset) -> dict:
+    """A fit's prediction of another record (thesis method 2, :func:`bayes_mr.identify.validate`):
+    :data:`VALIDATION_KEYS`, or ``error`` when it cannot predict it (another kind of test, a divergence)."""
+    try:
+        v = validate_fit(idata, record)
+    except (RuntimeError, ValueError) as exc:
+        return {"error": str(exc)}
+    return {k: v[k] for k in VALIDATION_KEYS}
 
 
 def compare(

@@ -23,10 +23,10 @@ import numpy as np
 import xarray as xr
 
 from . import results
+from .comparison import validation_scores
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.noise_floor import noise_floor, with_noise_floor
-from .identify import validate as validate_fit
 
 if TYPE_CHECKING:
     from .mainjob import Budget
@@ -165,19 +165,11 @@ def predict_other(fits: dict, other: xr.Dataset) -> list[dict]:
     Returns
     -------
     list of dict
-        One row per fit: ``model``, ``engine``, ``force_nrmse``, ``mse``, ``rmse`` (SI), or ``error`` when the
-        prediction failed (a diverged simulation is a row, not a crash).
+        One row per fit: ``model``, ``engine`` and :func:`~bayes_mr.comparison.validation_scores` (``force_nrmse``,
+        ``mse``, ``rmse`` [SI], …, or ``error`` when the prediction failed: a row, not a crash).
     """
-    rows = []
-    for (model, engine), idata in fits.items():
-        row = {"model": model, "engine": engine}
-        try:
-            v = validate_fit(idata, other)
-            row.update({k: v[k] for k in ("force_nrmse", "mse", "rmse")})
-        except (RuntimeError, ValueError) as exc:
-            row["error"] = str(exc)
-        rows.append(row)
-    return rows
+    return [{"model": model, "engine": engine, **validation_scores(idata, other)}
+            for (model, engine), idata in fits.items()]
 
 
 def diagnosis_on_other(d: dict, folder: Path, budget: Budget, record: xr.Dataset,
@@ -211,11 +203,9 @@ def diagnosis_on_other(d: dict, folder: Path, budget: Budget, record: xr.Dataset
     kept = bool((d.get("terms") or {}).get("kept"))
     for label in ("baseline", "extended", "terms")[:3 if kept else 2]:
         out[f"{label}_model"] = d[label]["model"]
-        try:
-            v = validate_fit(results.load_result(folder / f"{label}.nc"), rec)
-            out[f"{label}_force_nrmse"], out[f"{label}_mse"] = v["force_nrmse"], v["mse"]
-        except (OSError, RuntimeError, ValueError) as exc:
-            out[f"{label}_error"] = str(exc)
+        path = folder / f"{label}.nc"
+        v = validation_scores(results.load_result(path), rec) if path.exists() else {"error": f"no {path}"}
+        out.update({f"{label}_{k}": v[k] for k in ("force_nrmse", "mse", "error") if k in v})
     return out, rec
 
 

@@ -161,8 +161,8 @@ def diagnose(
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(_unexplained(record, before, after, [c.name for c in selected]), seed=seed, threshold=search.threshold,
                residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
-    out["terms"], term_fit = _search(record, ext, _asked(out) if terms is None else terms, validate,
-                                     (seed, search.threshold), say)
+    out["terms"], term_fit = _search(record, ext, _asked(out) if terms is None else terms, validate, seed,
+                                     search.threshold, say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
     if out_dir is not None:  # the report states the time to here; the JSON the time with the report
         out.update(_write(out, record, (base, ext, term_fit), before, after, rounds, Path(out_dir), seed))
@@ -205,8 +205,8 @@ def _asked(out: dict) -> str | None:
     return None
 
 
-def _search(record: xr.Dataset, ext: Fit, ask: bool | str | None, validate: xr.Dataset | None,
-            seed_threshold: tuple[int, float], say) -> tuple[dict | None, Fit | None]:
+def _search(record: xr.Dataset, ext: Fit, ask: bool | str | None, validate: xr.Dataset | None, seed: int,
+            threshold: float, say) -> tuple[dict | None, Fit | None]:
     """The term search (:mod:`.terms`) on the final model: ``ask`` True/False, or why it runs by default
     (:func:`_asked`; None: it does not); with ``validate``, the kept terms' model predicts it (``validation``).
 
@@ -219,7 +219,6 @@ def _search(record: xr.Dataset, ext: Fit, ask: bool | str | None, validate: xr.D
     """
     if ask is False or ask is None:
         return None, None
-    seed, threshold = seed_threshold
     found, fit = search_terms(record, ext, seed=seed, threshold=threshold, progress=say)
     found["asked"] = "explicitly" if ask is True else ask
     say(f"terms kept: {', '.join(found['kept']) or 'none'}")

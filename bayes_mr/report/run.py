@@ -292,7 +292,7 @@ def second_record_sentence(summary: dict) -> str | None:
     ok = [r for r in s["rows"] if r.get("force_nrmse") is not None]
     line = (f"Second record of the same damper ({rec['source']}; {rec['duration_s']:.1f} s at {rec['fs']:.0f} Hz, "
             "never fitted): ")
-    sel_row = next((r for r in ok if (r["model"], r["engine"]) == (sel, "lsq")), None)
+    sel_row = _row(ok, sel, "lsq")
     parts = []
     if sel_row is not None:
         parts.append(f"the selected model ({sel}, least squares) predicts it with force NRMSE "
