@@ -406,6 +406,7 @@ class Model:
         """The float64 constants array the kernel reads (mass, envelope time, step control)."""
         cst = np.zeros(kernel.CONST_SIZE)
         cst[kernel.K_MASS] = float(mass) if mass else 1.0
+        cst[kernel.K_IMASS] = 1.0 / cst[kernel.K_MASS]
         sa = self.effect("small_amplitude_regime")
         cst[kernel.K_TENV] = float(sa.options["t_env"]) if sa else 1.0
         cst[kernel.K_CACC] = c_acc
