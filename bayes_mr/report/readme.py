@@ -79,7 +79,7 @@ def bench_section(r: dict) -> str:
     rel = r.get("train_best_rel_error", {})
     worst = max(rel.values()) if rel else float("nan")
     rows = [
-        ("UKF, ours (100 priors at once, all cores), per run and sample", f"{r['ukf_us_per_step']:.2f} µs"),
+        ("UKF, ours (100 priors at once, all cores), per run and sample filtered", f"{r['ukf_us_per_step']:.2f} µs"),
         ("UKF, ours (one run, one thread), per sample", f"{r['ukf_us_per_step_single']:.2f} µs"),
         ("filterpy UnscentedKalmanFilter, model in Python, per sample", f"{r['filterpy_us_per_step']:.0f} µs"),
         ("filterpy with our compiled model step, per sample", f"{r['filterpy_compiled_fx_us_per_step']:.0f} µs"),
