@@ -73,7 +73,7 @@ K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
 K_NMAX = 3  # most sub-steps per sample
 assert K_SMOOTH == 4, "kernel_effects' constant must follow the step-control constants"
 K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the step control: the divisions by
-#              the mass, by c_acc and by n_sub cost the specialised dahl structure step 57 -> 34.5 ns per sample
+#              the mass, by c_acc and by n_sub cost the specialised dahl structure step 66 -> 35 ns per sample
 #              (measured; the step-control divisions sat between a sample's state and its first RK4 stage)
 CONST_SIZE = 6
 
