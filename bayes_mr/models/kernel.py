@@ -262,6 +262,14 @@ def mass(lay, cst, p):
 
 
 @hot(inline="always")
+def inv_mass(lay, cst, p):
+    """1/m [1/kg] of :func:`mass`: one division for a forced test's parameter m, none for the constant."""
+    if lay[L_MASS] >= 0:
+        return 1.0 / p[lay[L_MASS]]
+    return cst[K_IMASS]
+
+
+@hot(inline="always")
 def acceleration(lay, cst, p, a, f_r):
     """Absolute acceleration [m/s²]: structure −f_r/m (= ẍ + ẍ_g); forced (p − f_r)/m (= ẍ)."""
     if lay[L_KIND] == FORCED:
@@ -363,7 +371,7 @@ def rate(lay, cst, p, t, s, vmax):
         damp += _fluid_slope(lay, cst, p, vmax)
     stiff *= m_k
     if lay[L_KIND] != DEVICE:
-        im = cst[K_IMASS] if lay[L_MASS] < 0 else 1.0 / p[lay[L_MASS]]  # 1/m: products, not divisions
+        im = inv_mass(lay, cst, p)  # products, not divisions
         if lay[L_K3] >= 0:
             stiff += 3.0 * abs(p[lay[L_K3]]) * s[0] * s[0]
         lam += damp * im + math.sqrt(abs(stiff) * im) + math.sqrt(abs(coupling) * im)
