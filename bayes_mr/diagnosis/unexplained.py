@@ -20,7 +20,8 @@ Per measured channel:
 
 The verdict (:func:`verdict`) keeps "none" for a model at its noise floor:
 when no effect passes and the residual stays far above the floor, the answer
-is "unexplained by the vocabulary", not "the model is right".
+is "unexplained by the vocabulary", not "the model is right"; named effects
+that leave the model far above its floor only "partly explain" the residual.
 """
 
 from __future__ import annotations
@@ -55,8 +56,9 @@ N_SEGMENTS = 10
 SWITCH_S = 0.1
 #: Frequency band edges [Hz] (cut at the Nyquist rate).
 BAND_EDGES = (0.0, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)
-#: Verdicts (``verdict`` JSON key); the third is followed by the effect names.
-AT_FLOOR, BEYOND, EXPLAINED = "at the noise floor", "unexplained by the vocabulary", "explained by"
+#: Verdicts (``verdict`` JSON key); the last two are followed by the effect names (:func:`verdict`).
+AT_FLOOR, BEYOND, EXPLAINED, PARTLY = ("at the noise floor", "unexplained by the vocabulary", "explained by",
+                                       "partly explained by")
 
 
 def _ratio(r: np.ndarray, floor: float) -> float | None:
@@ -186,8 +188,13 @@ def worst_ratio(unexp: dict[str, dict]) -> float:
 
 
 def verdict(effects: list[str], unexp: dict[str, dict], threshold: float = FLOOR_RATIO) -> str:
-    """``"explained by E1+E2"`` when effects were named; else ``"at the noise floor"`` when the
-    worst fitted channel is within ``threshold`` × its floor, ``"unexplained by the vocabulary"`` otherwise."""
-    if effects:
-        return f"{EXPLAINED} {'+'.join(effects)}"
-    return AT_FLOOR if worst_ratio(unexp) <= threshold else BEYOND
+    """What the effects named (in order) leave in ``unexp`` (the final model's :func:`unexplained`), in words.
+
+    With the worst fitted channel within ``threshold`` × its floor: ``"explained by E1+E2"``, or ``"at the
+    noise floor"`` when no effect was named. Above it: ``"partly explained by E1+E2; the rest unexplained by
+    the vocabulary"``, or ``"unexplained by the vocabulary"`` when no effect was named.
+    """
+    named = "+".join(effects)
+    if worst_ratio(unexp) <= threshold:
+        return f"{EXPLAINED} {named}" if effects else AT_FLOOR
+    return f"{PARTLY} {named}; the rest {BEYOND}" if effects else BEYOND

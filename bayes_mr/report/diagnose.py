@@ -312,14 +312,18 @@ def terms_text(out: dict) -> list[str]:
         return []
     lines = ["## Terms outside the vocabulary", "",
              f"Searched ({t['asked']}) by lasso on the library's output sensitivities over the first "
-             f"{fmt(100 * (1 - t['holdout']))} % of the record; each proposal refitted inside the model and kept only "
+             f"{fmt(100 * (1 - t['holdout']))} % of the record; each proposal refitted inside the model; it passes "
              f"if its score passes the threshold, Δ ln Z > 0 and the error falls on the held-out last "
-             f"{fmt(100 * t['holdout'])} % (in ≥ 8 of 10 blocks).", "",
-             "| term | score | Δ ln Z | held-out MSE ratio | blocks better | kept |", "|---|---|---|---|---|---|"]
+             f"{fmt(100 * t['holdout'])} % (in ≥ 8 of 10 blocks), and is kept only if it passes again with the "
+             f"first {fmt(100 * t['holdout'])} % held out instead (other fold).", "",
+             "| term | score | Δ ln Z | held-out MSE ratio | blocks better | other fold: ratio, blocks | kept |",
+             "|---|---|---|---|---|---|---|"]
     for r in t["proposed"]:
+        o = r.get("other_fold")
         lines.append(f"| `{r['term']}` | {fmt(r.get('score'))} | {fmt(r.get('delta_log_evidence'))} | "
                      f"{fmt(r.get('heldout_mse_ratio'))} | {r.get('heldout_blocks_better', '–')} | "
-                     f"{'yes' if r['kept'] else 'no'} |")
+                     + (f"{fmt(o['heldout_mse_ratio'])}, {o['heldout_blocks_better']}" if o else "–")
+                     + f" | {'yes' if r['kept'] else 'no'} |")
     lines.append("")
     if t["kept"]:
         lines += [f"Kept: `{t['model']}` (whole record: MSE ratio {fmt(t['mse_ratio'])}, "

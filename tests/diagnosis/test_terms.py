@@ -5,7 +5,7 @@ import pytest
 
 from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.library import library
-from bayes_mr.diagnosis.terms import search_terms
+from bayes_mr.diagnosis.terms import MIN_BLOCKS, folds, search_terms
 from bayes_mr.likelihood import record_scales
 from bayes_mr.models import get_model
 from bayes_mr.models import terms as lib
@@ -56,6 +56,10 @@ def test_search_finds_and_refits_a_term_outside_the_vocabulary():
     assert out["proposed"][0]["term"] == "term(xdot*abs(x))"
     assert out["kept"] == ["term(xdot*abs(x))"]
     assert out["proposed"][0]["heldout_mse_ratio"] < 0.1
+    # and again with the first 30 % held out instead: a real term helps wherever the record is held out
+    other = out["proposed"][0]["other_fold"]
+    assert other["passed"] and other["heldout_mse_ratio"] < 0.1 and other["heldout_blocks_better"] >= MIN_BLOCKS
+    assert out["other_fold_until_s"] == pytest.approx(0.3 * 4.0, abs=2e-3)
     truth = fit_model(rec, "dahl+term(abs(x)*xdot)")
     assert whole.mse < 1.05 * truth.mse and whole.mse / base.mse < 0.1
     theta_true = 0.3 * record_scales(signal_record("dahl", "device", **OPTS)).force
@@ -70,6 +74,16 @@ def test_search_keeps_nothing_on_a_clean_record():
     out, whole = search_terms(rec, base, seed=0)
     assert out["kept"] == [] and whole is base
     assert len(out["proposed"]) >= 1  # something was proposed and refused, not a search that saw nothing
+    assert all(r["other_fold"] is None or not r["other_fold"]["passed"] for r in out["proposed"])
+
+
+def test_folds_hold_out_the_end_then_the_start():
+    rec = _record("dahl")
+    n = rec.sizes["time"]
+    end, start = folds(rec, 0.3)
+    assert (end.held.start, start.held.stop) == (1400, 600) and n == 2000
+    assert not end.train["valid"].values[1400:].any() and end.train["valid"].values[:1400].all()
+    assert not start.train["valid"].values[:600].any() and start.train["valid"].values[600:].all()
 
 
 def test_library_has_no_repeated_or_model_terms():
