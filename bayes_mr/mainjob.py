@@ -102,7 +102,7 @@ class Budget:
     terms : bool
         After the named effects, search the term library for what the extended model still leaves
         (:mod:`bayes_mr.diagnosis.terms`; a term is kept only if the evidence and the error on a held-out
-        end of A both improve), whatever the verdict: on the measured damper the named effects leave ~80×
+        end of A both improve, and again with the start of A held out), whatever the verdict: on the measured damper the named effects leave ~80×
         the noise floor, and that is what the diagnosis must speak to.
     """
 

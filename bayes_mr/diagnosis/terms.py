@@ -139,13 +139,16 @@ def _try(record: xr.Dataset, fold: Fold, current: Fit, prop: Proposal, check, se
                               lik.phi_lo[j], lik.phi_hi[j])
         ext, _ = refit(lik, np.vstack([starts[:1], guess, starts[1:]]), current.result.sigma, n_refine=3)
         judged = _judge(record, current, ext, effect, fold.held, threshold)
-        other = None
-        if judged["passed"]:
-            other_fold, refit_on = check
-            other = _judge(record, refit_on(current), refit_on(ext), effect, other_fold.held, threshold)
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         row.update(kept=False, error=str(exc))
         return row
+    other = None
+    if judged["passed"]:
+        other_fold, refit_on = check
+        try:
+            other = _judge(record, refit_on(current), refit_on(ext), effect, other_fold.held, threshold)
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
+            other = {"passed": False, "error": str(exc)}
     passed = judged.pop("passed")
     row.update(judged, theta_refit=_num(ext.params()[effect.params[0].name]), other_fold=other,
                kept=bool(passed and other is not None and other["passed"]), fit=ext)
@@ -166,7 +169,8 @@ def _step(record: xr.Dataset, fold: Fold, current: Fit, proposals: list[Proposal
         ext = row.pop("fit", None)
         other = row.get("other_fold")
         say(f"term {prop.name}: score {row.get('score')}, held-out MSE ratio {row.get('heldout_mse_ratio')}"
-            + (f" (other fold {other['heldout_mse_ratio']}, {other['heldout_blocks_better']} blocks)" if other else "")
+            + (f" (other fold {other.get('heldout_mse_ratio')}, {other.get('heldout_blocks_better')} blocks)"
+               if other else "")
             + f", {'kept' if row['kept'] else 'dropped'}")
         rows.append(row)
         if row["kept"]:

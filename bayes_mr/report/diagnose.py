@@ -322,7 +322,7 @@ def terms_text(out: dict) -> list[str]:
         o = r.get("other_fold")
         lines.append(f"| `{r['term']}` | {fmt(r.get('score'))} | {fmt(r.get('delta_log_evidence'))} | "
                      f"{fmt(r.get('heldout_mse_ratio'))} | {r.get('heldout_blocks_better', '–')} | "
-                     + (f"{fmt(o['heldout_mse_ratio'])}, {o['heldout_blocks_better']}" if o else "–")
+                     + (f"{fmt(o.get('heldout_mse_ratio'))}, {o.get('heldout_blocks_better', '–')}" if o else "–")
                      + f" | {'yes' if r['kept'] else 'no'} |")
     lines.append("")
     if t["kept"]:
