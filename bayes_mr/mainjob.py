@@ -102,8 +102,8 @@ class Budget:
     terms : bool
         After the named effects, search the term library for what the extended model still leaves
         (:mod:`bayes_mr.diagnosis.terms`; a term is kept only if the evidence and the error on a held-out
-        end of A both improve, and again with the start of A held out), whatever the verdict: on the measured damper the named effects leave ~80×
-        the noise floor, and that is what the diagnosis must speak to.
+        end of A both improve, and again with the start of A held out), whatever the verdict: on the measured
+        damper the named effects leave ~80× the noise floor, and that is what the diagnosis must speak to.
     """
 
     fs: float
@@ -126,9 +126,11 @@ class Budget:
 #: simulator sub-steps the stiff hysteresis). Within ~15 minutes on 2 cores: an emcee posterior of at
 #: most 1000 steps for the forms of ≤ 5 free parameters (dahl, lugre, bouc-wen: ~70, ~80 and ~30 s on
 #: part A, measured; normalized Bouc–Wen costs ~5× dahl per simulation and Spencer ~80×). 1000 steps
-#: are ~30–50 integrated autocorrelation times here, short of the ≥ 50 τ and R-hat < 1.01 the package
-#: asks of a posterior (~3000 steps would be, measured: 10 more minutes): the report flags them NOT
-#: converged rather than hide it. Each posterior also stops at 150 s (``max_seconds``): classic
+#: are ~25–40 integrated autocorrelation times here, short of the ≥ 50 τ and R-hat < 1.01 the package
+#: asks of a posterior: the report flags them NOT converged rather than hide it. Measured on this part A
+#: with the specialised kernels (issue 16): dahl converges at 3250 steps (τ 24, R-hat 1.0100; 168 s with
+#: its least-squares start, against ~60 s for 1000), lugre had not at 4000 (τ 39, R-hat 1.0107; 169 s),
+#: so converging both would add ~4–5 minutes to a job already past its 15. Each posterior also stops at 150 s (``max_seconds``): classic
 #: Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading
 #: branch and a very stiff unloading one, MSE 941 against 966 with γ > 0), where every evaluation needs
 #: tens of sub-steps per sample and 1000 steps ran past 13 minutes. Selection is by the Laplace evidence every form has; a

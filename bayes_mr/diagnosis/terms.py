@@ -37,6 +37,7 @@ import numpy as np
 import xarray as xr
 
 from ..likelihood import OutputError
+from ..models import Effect
 from ..models import terms as lib
 from ..models.kernel import N_TERMS
 from .fits import Fit, record_mse, refit
@@ -112,7 +113,7 @@ def _refit_on(record: xr.Dataset, fit: Fit, start: np.ndarray | None = None) -> 
     return out
 
 
-def _judge(record: xr.Dataset, current: Fit, ext: Fit, effect, held: slice, threshold: float) -> dict:
+def _judge(record: xr.Dataset, current: Fit, ext: Fit, effect: Effect, held: slice, threshold: float) -> dict:
     """``ext`` (= ``current`` + a term, fitted on the same fold) against ``current``: the keep rules' figures."""
     s, kappa, dll, _ = score(current, ext, effect)
     dlz = ext.result.log_evidence - current.result.log_evidence
@@ -213,8 +214,9 @@ def search_terms(record: xr.Dataset, fit: Fit, *, seed: int = 0, threshold: floa
         held out, for a term that passed on the last, else None; ``kept``), ``kept``
         (names), ``sentences``, ``model``, ``params``, ``mse_ratio`` and
         ``delta_log_evidence`` of the whole-record refit against ``fit``,
-        ``holdout``, ``heldout_from_s``, ``other_fold_until_s`` — and the whole-record fit of the model with the kept
-        terms (``fit`` itself when none is kept).
+        ``holdout``, ``heldout_from_s``, ``other_fold_until_s`` — and the
+        whole-record fit of the model with the kept terms (``fit`` itself when
+        none is kept).
     """
     say = progress or (lambda msg: None)
     fold, other = folds(record, holdout)
