@@ -110,3 +110,22 @@ def test_study_section_copies_its_report_and_figures(tmp_path):
     assert "Added: inertia." in text and "old" not in text and "# Title" not in text
     assert "![part B](figures/damper-extension_extension_part_b.png)" in text
     assert (tmp_path / "figures" / "damper-extension_extension_part_b.png").read_bytes() == b"png"
+
+
+def test_the_headline_says_which_posterior_did_not_converge_and_why():
+    """Issue 16 item 3: each unconverged chain with its length in τ and its R-hat; forms without a posterior
+    named, the selected one first."""
+    from bayes_mr.report.run import _posterior_lines
+
+    rows = [{"engine": "mcmc", "model": "dahl", "n_steps": 3250, "tau_max": 24.0, "rhat_max": 1.008,
+             "converged": True, "stopped": "converged"},
+            {"engine": "mcmc", "model": "lugre", "n_steps": 1000, "tau_max": 25.0, "rhat_max": 1.04,
+             "converged": False, "stopped": "max_steps"},
+            {"engine": "lsq", "model": "spencer"}]
+    skipped = {"normalized-bouc-wen": "6 free parameters", "spencer": "13 free parameters"}
+    chains, none = _posterior_lines(rows, "spencer", skipped)
+    assert "lugre (step limit: 1000 steps = 40 τ, R-hat 1.04) NOT converged" in chains and "dahl (" not in chains
+    assert none == ("No emcee posterior for spencer (the selected model): 13 free parameters; "
+                    "normalized-bouc-wen: 6 free parameters.")
+    assert _posterior_lines(rows[:1], "dahl", {}) == [
+        "emcee posteriors for dahl (3250 steps; R-hat_max 1.01): converged (≥ 50 τ, R-hat < 1.01)."]

@@ -314,6 +314,29 @@ def second_record_sentence(summary: dict) -> str | None:
     return line + ("; ".join(parts) or "no fit could predict it") + "."
 
 
+def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str]) -> list[str]:
+    """The headline's emcee sentence: which posteriors converged, which did not and why (the chain's length in
+    integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked), and which forms
+    got none (the selected one named first)."""
+    chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
+    why = {"max_steps": "step limit", "max_seconds": "time limit"}
+    lines = []
+    if chains:
+        unconverged = [f"{r['model']} ({why.get(r.get('stopped'), 'budget')}: {r.get('n_steps')} steps = "
+                       f"{fmt((r.get('n_steps') or 0) / r['tau_max'], 2) if r.get('tau_max') else '?'} τ, "
+                       f"R-hat {fmt(r.get('rhat_max'), 3)})" for r in chains if not r.get("converged")]
+        lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
+                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
+                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
+                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
+                        if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
+    if skipped:
+        order = sorted(skipped, key=lambda m: m != selected)
+        lines.append("No emcee posterior for " + "; ".join(
+            f"{m}{' (the selected model)' if m == selected else ''}: {skipped[m]}" for m in order) + ".")
+    return lines
+
+
 def headline(summary: dict) -> list[str]:
     """The sentences a structural engineer reads first (every number from this run)."""
     rows, sel = summary["rows"], summary["selected"]
@@ -326,15 +349,7 @@ def headline(summary: dict) -> list[str]:
                  + _floor_sentence(rec))
     lines += _selection_lines(summary)
     lines += _noise_lines(summary)
-    chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
-    if chains:
-        why = {"max_steps": "step limit", "max_seconds": "time limit"}
-        unconverged = [f"{r['model']} ({why.get(r.get('stopped'), 'budget')})" for r in chains if not r.get("converged")]
-        lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
-                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
-                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
-                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
-                        if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
+    lines += _posterior_lines(rows, sel, summary.get("mcmc_skipped") or {})
     best = summary["best_on_part_b"]
     sp = summary["spencer_1997"].get("part_b", {})
     if best:
