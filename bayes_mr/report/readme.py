@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .run import headline
+from .headline import headline
 
 #: The run's figures shown in the README, in order (keys of :func:`readme_figures`).
 RUN_FIGURES = ("force_b", "force_velocity_b", "residual_velocity_b", "force_second", "diagnose_hysteresis",
