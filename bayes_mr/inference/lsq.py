@@ -213,7 +213,7 @@ class _Residuals:
         if self.schedule is None:
             self(phi)
         yhat, _ = self.lik.predict(np.array(batch), schedule=self.schedule)
-        r = [self.last[1]] * known + [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
+        r = ([self.last[1]] if known else []) + [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
         # a perturbed simulation that diverges says nothing about the slope: treat it as flat
         r = [ri if np.all(np.isfinite(ri)) else r[0] for ri in r]
         if not np.all(np.isfinite(r[0])):
