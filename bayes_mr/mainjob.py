@@ -86,8 +86,8 @@ class Budget:
     ukf_taus : tuple of float
         Indices of dispersion (thesis: ten).
     input_interp : {"linear", "bandlimited"} or None
-        Inputs between samples (None: ``auto``). ``make run`` keeps linear, as every earlier run: ``auto`` would
-        read its 250 Hz record band-limited (S = 11, measured), several times the run's budget.
+        Inputs between samples (None: ``auto``). ``make run`` keeps linear, as every earlier run: ``auto`` read
+        its record at 250 Hz band-limited (S = 11, measured), several times the run's budget.
     noise : {"iid", "ar"}
         Residual model of the comparison's likelihood (``Identify.noise``).
         The other one is also fitted by least squares, so the report says how
@@ -122,24 +122,23 @@ class Budget:
     terms: bool = True
 
 
-#: ``make run``: the whole trimmed record at ~250 Hz (the force's content lies below ~50 Hz; the
-#: simulator sub-steps the stiff hysteresis). Within ~15 minutes on 2 cores: an emcee posterior of at
-#: most 1000 steps for the forms of ≤ 5 free parameters (dahl, lugre, bouc-wen: ~70, ~80 and ~30 s on
-#: part A, measured; normalized Bouc–Wen costs ~5× dahl per simulation and Spencer ~80×). 1000 steps
-#: are ~25–40 integrated autocorrelation times here, short of the ≥ 50 τ and R-hat < 1.01 the package
-#: asks of a posterior: the report flags them NOT converged rather than hide it. Measured on this part A
-#: with the specialised kernels (issue 16): dahl converges at 3250 steps (τ 24, R-hat 1.0100; 168 s with
-#: its least-squares start, against ~60 s for 1000), lugre had not at 4000 (τ 39, R-hat 1.0107; 169 s),
-#: so converging both would add ~4–5 minutes to a job already past its 15. Each posterior also stops at 150 s (``max_seconds``): classic
-#: Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading
-#: branch and a very stiff unloading one, MSE 941 against 966 with γ > 0), where every evaluation needs
-#: tens of sub-steps per sample and 1000 steps ran past 13 minutes. Selection is by the Laplace evidence every form has; a
-#: thermodynamic-integration ladder per form (several minutes each on this record) does not fit —
-#: ``bayes-mr compare --engines mcmc`` runs it. The diagnosis of the selected model runs on all of part A at
-#: 1 kHz (:attr:`Budget.diagnose_fs`; for spencer ~4 min, the extension study's procedure from the
-#: comparison's optimum).
-FULL = Budget(fs=250.0, duration_s=None, mcmc_max_params=5,
-              mcmc=MCMCSettings(max_steps=1000, max_seconds=150.0, check_every=250), evidence="laplace",
+#: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's
+#: RK4 sub-steps are set by the model's stiffness, not by the sampling rate: at this record's
+#: least-squares optima a 24-walker likelihood evaluation costs the same at 250 Hz and 1 kHz (measured:
+#: dahl 62 and 65 ms — 19.5 and 4.5 sub-steps per sample —, lugre 13 and 14, bouc-wen 757 and 663,
+#: normalized-bouc-wen 557 and 491, spencer 149 and 163 ms), and the job took 16.8 min at 1 kHz against
+#: 17.8 at 250 Hz with the same budget (issue 16). Each form of ≤ 5 free parameters gets an emcee
+#: posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s
+#: (``max_seconds``). At 1 kHz dahl converged at 3000 steps (66 s) and lugre at 5500 (84 s), where 1000
+#: steps had left them at R-hat 1.04; the job took 18.5 min with them converged. Classic Bouc–Wen with
+#: a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading branch and a
+#: very stiff unloading one), where every evaluation needs ~26 sub-steps per 1-kHz sample and a step
+#: ~0.75 s: ~200 steps, NOT converged, and the headline says so. Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per
+#: form (several minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
+#: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
+#: spencer ~5 min, the extension study's procedure from the comparison's optimum).
+FULL = Budget(fs=1000.0, duration_s=None, mcmc_max_params=5,
+              mcmc=MCMCSettings(max_steps=8000, max_seconds=150.0, check_every=250), evidence="laplace",
               ukf_lhs=2)
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
