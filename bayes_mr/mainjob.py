@@ -133,8 +133,9 @@ class Budget:
 #: steps had left them at R-hat 1.04; the job took 18.5 min with them converged. Classic Bouc–Wen with
 #: a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading branch and a
 #: very stiff unloading one), where every evaluation needs ~26 sub-steps per 1-kHz sample and a step
-#: ~0.75 s: ~200 steps, NOT converged, and the headline says so. Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per
-#: form (several minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
+#: ~0.75 s: ~200 steps, NOT converged, and the headline says so. Selection is by the Laplace evidence
+#: every form has; a thermodynamic-integration ladder per form (several minutes each on this record)
+#: does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None, mcmc_max_params=5,
