@@ -168,8 +168,9 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
         engines = _engines_for(form, budget, kind)
         if "mcmc" not in engines:
             skipped[form] = (f"{len(get_model(form).free_names(kind))} free parameters, more than the "
-                             f"{budget.mcmc_max_params} this budget samples (a chain's τ grows with the dimension "
-                             f"and each simulation costs more: ≥ 50 τ and R-hat < 1.01 would not fit the job's time)")
+                             f"{budget.mcmc_max_params} this budget samples (a chain's τ grows with the "
+                             f"dimension and each simulation costs more: ≥ 50 τ and R-hat < 1.01 would not fit "
+                             f"the job's time)")
         out = compare(part_a, [form], engines=engines, validate=part_b, seed=seed, progress=say,
                       estimators=estimators, noise=budget.noise)
         rows += out["rows"]
