@@ -31,7 +31,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
@@ -56,17 +56,21 @@ class Fold:
 
     Attributes
     ----------
-    name : {"end", "start"}
-        Which part of the record is held out.
     train : xarray.Dataset
         The record with the held-out samples marked invalid (they still drive the simulation).
     held : slice
         The held-out samples.
     """
 
-    name: str
     train: xr.Dataset
     held: slice
+    _fits: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def refit(self, fit: Fit) -> Fit:
+        """``fit``'s model refitted on :attr:`train` from its optimum (once per model: later calls reuse it)."""
+        if fit.name not in self._fits:
+            self._fits[fit.name] = _refit_on(self.train, fit)
+        return self._fits[fit.name]
 
 
 def folds(record: xr.Dataset, holdout: float) -> tuple[Fold, Fold]:
@@ -74,7 +78,7 @@ def folds(record: xr.Dataset, holdout: float) -> tuple[Fold, Fold]:
     n = int(record.sizes["time"])
     cut = int(round((1.0 - holdout) * n))
     end, start = slice(cut, None), slice(0, n - cut)
-    return Fold("end", _masked(record, end), end), Fold("start", _masked(record, start), start)
+    return Fold(_masked(record, end), end), Fold(_masked(record, start), start)
 
 
 def _masked(record: xr.Dataset, held: slice) -> xr.Dataset:
@@ -105,11 +109,10 @@ def heldout_blocks(record: xr.Dataset, base: Fit, ext: Fit, held: slice) -> int:
     return int(sum(np.sum(b) > 0 for b in np.array_split(d, N_BLOCKS) if b.size))
 
 
-def _refit_on(record: xr.Dataset, fit: Fit, start: np.ndarray | None = None) -> Fit:
+def _refit_on(record: xr.Dataset, fit: Fit) -> Fit:
     """``fit``'s model refitted on ``record`` from its optimum (same ranges, scales and residual model)."""
     lik = OutputError(fit.model, record, ranges=fit.lik.ranges, scales=fit.lik.scales, residual=fit.lik.residual)
-    phi = fit.phi if start is None else start
-    out, _ = refit(lik, np.atleast_2d(phi), fit.result.sigma, n_refine=1)
+    out, _ = refit(lik, np.atleast_2d(fit.phi), fit.result.sigma, n_refine=1)
     return out
 
 
@@ -124,9 +127,10 @@ def _judge(record: xr.Dataset, current: Fit, ext: Fit, effect: Effect, held: sli
                 passed=bool(s > threshold and dlz > 0 and ratio < 1.0 and blocks >= MIN_BLOCKS))
 
 
-def _try(record: xr.Dataset, fold: Fold, current: Fit, prop: Proposal, check, seed: int, threshold: float) -> dict:
+def _try(record: xr.Dataset, fold: Fold, other: Fold, current: Fit, prop: Proposal, seed: int,
+         threshold: float) -> dict:
     """Refit ``current`` + the proposed term on ``fold``'s training part; judge it there and, when it passes,
-    on the other fold (``check``: that fold and a function giving a model's refit on it)."""
+    on ``other`` (current model and extension refitted there from their optima)."""
     effect = lib.make(prop.name, current.model.form.name)
     model = current.model + effect
     row = prop.to_dict()
@@ -143,16 +147,15 @@ def _try(record: xr.Dataset, fold: Fold, current: Fit, prop: Proposal, check, se
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         row.update(kept=False, error=str(exc))
         return row
-    other = None
+    checked = None
     if judged["passed"]:
-        other_fold, refit_on = check
         try:
-            other = _judge(record, refit_on(current), refit_on(ext), effect, other_fold.held, threshold)
+            checked = _judge(record, other.refit(current), other.refit(ext), effect, other.held, threshold)
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
-            other = {"passed": False, "error": str(exc)}
+            checked = {"passed": False, "error": str(exc)}
     passed = judged.pop("passed")
-    row.update(judged, theta_refit=_num(ext.params()[effect.params[0].name]), other_fold=other,
-               kept=bool(passed and other is not None and other["passed"]), fit=ext)
+    row.update(judged, theta_refit=_num(ext.params()[effect.params[0].name]), other_fold=checked,
+               kept=bool(passed and checked is not None and checked["passed"]), fit=ext)
     return row
 
 
@@ -161,17 +164,17 @@ def _num(v) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def _step(record: xr.Dataset, fold: Fold, current: Fit, proposals: list[Proposal], check, seed: int,
+def _step(record: xr.Dataset, fold: Fold, other: Fold, current: Fit, proposals: list[Proposal], seed: int,
           threshold: float, say) -> tuple[list[dict], Fit | None]:
     """Try ``proposals`` in order against ``current``; stop at the first kept (rows tried, its fit or None)."""
     rows = []
     for prop in proposals:
-        row = _try(record, fold, current, prop, check, seed, threshold)
+        row = _try(record, fold, other, current, prop, seed, threshold)
         ext = row.pop("fit", None)
-        other = row.get("other_fold")
+        checked = row.get("other_fold")
         say(f"term {prop.name}: score {row.get('score')}, held-out MSE ratio {row.get('heldout_mse_ratio')}"
-            + (f" (other fold {other.get('heldout_mse_ratio')}, {other.get('heldout_blocks_better')} blocks)"
-               if other else "")
+            + (f" (other fold {checked.get('heldout_mse_ratio')}, {checked.get('heldout_blocks_better')} blocks)"
+               if checked else "")
             + f", {'kept' if row['kept'] else 'dropped'}")
         rows.append(row)
         if row["kept"]:
@@ -220,14 +223,7 @@ def search_terms(record: xr.Dataset, fit: Fit, *, seed: int = 0, threshold: floa
     """
     say = progress or (lambda msg: None)
     fold, other = folds(record, holdout)
-    current = _refit_on(fold.train, fit)
-    on_other: dict[str, Fit] = {}
-
-    def refit_on_other(f: Fit) -> Fit:
-        if f.name not in on_other:
-            on_other[f.name] = _refit_on(other.train, f)
-        return on_other[f.name]
-
+    current = fold.refit(fit)
     tried, seen, dropped = [], [], set()
     # forward: propose on the current model's residual, keep the first proposal that passes, propose again
     while len(lib.term_effects(current.model.effects)) < N_TERMS:
@@ -236,7 +232,7 @@ def search_terms(record: xr.Dataset, fit: Fit, *, seed: int = 0, threshold: floa
         seen.append({"model": current.name, **info, "proposed": [p.to_dict() for p in proposals]})
         say(f"term search on {current.name}: {len(names)} candidates, proposed "
             f"{', '.join(p.name for p in proposals) or 'none'}")
-        step = _step(record, fold, current, proposals, (other, refit_on_other), seed, threshold, say)
+        step = _step(record, fold, other, current, proposals, seed, threshold, say)
         tried.extend(step[0])
         dropped.update(r["term"] for r in step[0] if not r["kept"])
         if step[1] is None:
