@@ -39,6 +39,7 @@ import numpy as np
 from ..executor import run_jobs, share
 from ..stats import integrated_times
 from .mcmc import MCMCResult, MCMCSettings, sample
+from .moves import local_moves
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,7 @@ class Reference:
         d = self.mean.size
         cov = np.asarray(cov, float).reshape(d, d)
         self.chol = np.linalg.cholesky(0.5 * (cov + cov.T) + 1e-12 * np.trace(cov) / d * np.eye(d))
+        self.cov = self.chol @ self.chol.T
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self._log_norm = -0.5 * d * math.log(2 * math.pi) - float(np.sum(np.log(np.diag(self.chol))))
         z = rng.standard_normal((n_mass, d))
@@ -342,8 +344,15 @@ def rung_chain(tp: _Path, beta: float, start: np.ndarray, settings: MCMCSettings
 
     Module level with picklable arguments: a job for :func:`bayes_mr.executor.run_jobs`.
     """
+    if tp.kind == "reference":
+        # p_β lies between q and the posterior: q itself is the independence move's proposal
+        proposal = (tp.reference.mean, tp.reference.cov)
+    else:
+        # the power posteriors widen towards the prior box, which no Gaussian of the rung above fits
+        proposal = None
+        settings = replace(settings, moves=local_moves(settings.moves))
     return sample(tp.density(beta), start.mean(axis=0), np.eye(start.shape[1]), settings, initial=start,
-                  group=group)
+                  group=group, proposal=proposal)
 
 
 def _top_rung(target, posterior: MCMCResult, path: str, ref_seq) -> tuple[Reference | None, np.ndarray, np.ndarray]:

@@ -62,6 +62,26 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     assert 0.15 < res.acceptance.mean() < 0.6
 
 
+def test_independence_move_alone_is_exact_with_a_wrong_proposal():
+    """The independence move's Hastings factor: a proposal off-centre (Mahalanobis distance 0.7) and too
+    wide (×1.5 and ×2 in two coordinates) still gives the target's mean and spread (a chain with it alone), and so does
+    the default mixture with its pilot-fitted proposal, which mixes in a few steps. (A proposal too
+    *narrow* in some direction is exact too but mixes slowly there: in the mixture, DE carries it.)"""
+    mu, C, P, log_prob = correlated_gaussian(4, seed=3)
+    sd = np.sqrt(np.diag(C))
+    off = mu + np.linalg.cholesky(C) @ np.full(4, 0.35)  # |off − μ| = 0.7 in the target's metric
+    bad_cov = C * np.outer([1.5, 1.0, 1.0, 2.0], [1.5, 1.0, 1.0, 2.0])
+    alone = sample(log_prob, off, bad_cov, MCMCSettings(seed=11, progress=False, moves=(("independence", 1.0),)),
+                   proposal=(off, bad_cov))
+    default = sample(log_prob, mu + 2 * sd, 4 * C, MCMCSettings(seed=11, progress=False))
+    for res in (alone, default):
+        assert res.converged
+        assert np.all(np.abs((res.mean() - mu) / res.mcse()) < 2.58)
+        assert abs(chi2_z(res, mu, P)) < 3.0
+    assert alone.pilot_steps == 0 and default.pilot_steps == MCMCSettings().pilot_steps
+    assert default.tau.max() < 6.0, default.tau  # a Gaussian fitted to the pilot is close to this target
+
+
 def test_emcee_3_1_6_snooker_is_biased_and_ours_is_not():
     """emcee 3.1.6's DESnookerMove under-disperses (dfm/emcee#531); the package's corrected move does not.
 
@@ -124,21 +144,32 @@ class Interrupt(Exception):
     pass
 
 
-def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path):
+@pytest.mark.parametrize("where", ["pilot", "chain"])
+def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, where):
     """The log-density raises mid-run (a killed job); resuming from the HDF5 checkpoint finishes it.
 
-    The resumed chain, its diagnostics and the stopping step equal those of a
-    run that was never interrupted — the backend carries emcee's random state.
+    Killed in the pilot chain (which fits the independence proposal) or in
+    the chain proper: the resumed chain, its diagnostics and the stopping
+    step equal those of a run that was never interrupted — the backend
+    carries emcee's random state, and the pilot's own group gives the same proposal.
     """
     mu, C, _, log_prob = correlated_gaussian(4, seed=4)
     settings = {"seed": 5, "progress": False, "check_every": 100, "min_tau_multiple": 20.0, "rhat_max": 1.05}
-    whole = sample(log_prob, mu, C, MCMCSettings(backend=tmp_path / "whole.h5", **settings))
+    counted = {"n": 0}
 
+    def counting(X):
+        counted["n"] += 1
+        return log_prob(X)
+
+    whole = sample(counting, mu, C, MCMCSettings(backend=tmp_path / "whole.h5", **settings))
+    assert whole.pilot_steps == MCMCSettings().pilot_steps
+    # 1 (independence), 2 (DE) or 4 (snooker) calls per step: both points die off the check grid
+    kill_at = 400 if where == "pilot" else counted["n"] - 25
     calls = {"n": 0}
 
     def flaky(X):
         calls["n"] += 1
-        if calls["n"] == 400:  # 2 (DE) or 4 (snooker) calls per step: dies off the check grid
+        if calls["n"] == kill_at:
             raise Interrupt
         return log_prob(X)
 
@@ -147,8 +178,10 @@ def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path):
         sample(flaky, mu, C, MCMCSettings(backend=path, **settings))
     import emcee
 
-    stopped = emcee.backends.HDFBackend(str(path), read_only=True).iteration
-    assert 100 < stopped < whole.n_steps and stopped % 100 != 0
+    group = "mcmc_pilot" if where == "pilot" else "mcmc"
+    stopped = emcee.backends.HDFBackend(str(path), name=group, read_only=True).iteration
+    n_steps = whole.pilot_steps if where == "pilot" else whole.n_steps
+    assert 0 < stopped < n_steps and stopped % 100 != 0
     resumed = sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **settings))
     assert np.array_equal(resumed.chain, whole.chain)
     assert np.array_equal(resumed.log_prob, whole.log_prob)
