@@ -311,10 +311,13 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     proposal : (ndarray (d,), ndarray (d, d))
     pilot_steps : int
     settings : MCMCSettings
-        The chain's settings, its wall-time budget less the pilot's.
+        The chain's settings, its wall-time budget less the pilot's (which may spend at most half of it).
     """
     seq = settings.seed if isinstance(settings.seed, np.random.SeedSequence) else np.random.SeedSequence(settings.seed)
-    pilot_settings = replace(settings, moves=local_moves(settings.moves), max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
+    # the pilot may spend half of a wall-time budget: the chain proper gets the rest
+    half = None if settings.max_seconds is None else 0.5 * settings.max_seconds
+    pilot_settings = replace(settings, moves=local_moves(settings.moves), max_seconds=half,
+                             max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
                              seed=np.random.SeedSequence(seq.entropy, spawn_key=seq.spawn_key + (PILOT_KEY,)))
     pilot = sample(log_prob, x0_center, x0_cov, pilot_settings, names=names, initial=initial,
                    group=group + "_pilot")

@@ -1,4 +1,4 @@
-"""Ensemble moves for emcee: the corrected DE snooker update, an independence proposal, and the names settings accept."""
+"""Ensemble moves for emcee: the corrected DE snooker update, an independence proposal, the names settings accept."""
 
 from __future__ import annotations
 
