@@ -35,7 +35,9 @@ with the pilot-fitted independence move (500 steps after a 500-step pilot,
 acceptance 0.53); a proposal from the least-squares Laplace approximation
 instead made it *worse* (τ ≈ 35, acceptance 0.16): that posterior's mean sits
 1–2 SD from the optimum in two coordinates and its ln σ correlate with φ, so
-q must come from the chain. DE and snooker, measured before: both are affine-invariant
+q must come from the chain. The local moves carry the chain where q fits
+badly (a curved valley, a posterior piled against a bound). DE and the
+snooker update (measured before the independence move): both are affine-invariant
 like the stretch move, but DE's scale is the optimal one for Gaussian targets
 in d dimensions while the stretch move's efficiency falls with d. Measured on
 a correlated 6-d Gaussian (scales over three decades, 24 walkers): integrated
@@ -248,7 +250,7 @@ def sample(
         can share one file, e.g. the temperatures of an evidence ladder).
     proposal : (ndarray (d,), ndarray (d, d)), optional
         Mean and scale of the independence move's fixed proposal (default:
-        the initial cloud's ``x0_center``, ``x0_cov``).
+        fitted to a pilot chain, module docstring).
 
     Returns
     -------
@@ -270,7 +272,7 @@ def sample(
     n_walkers = settings.walkers(d) if initial is None else int(np.shape(initial)[0])
     init_rng, move_state, entropy = run_seeds(settings.seed)
     backend, resuming = open_backend(settings, group, (n_walkers, d), entropy)
-    moves = settings.make_moves((x0_center, x0_cov) if proposal is None else proposal)
+    moves = settings.make_moves(proposal)
     sampler = emcee.EnsembleSampler(n_walkers, d, log_prob, moves=moves, backend=backend, vectorize=True)
     if resuming:
         state = sampler.backend.get_last_sample()  # carries the stored random state
