@@ -129,11 +129,11 @@ class Budget:
 #: normalized-bouc-wen 557 and 491, spencer 149 and 163 ms), and the job took 16.8 min at 1 kHz against
 #: 17.8 at 250 Hz with the same budget (issue 16). Each form of ≤ 5 free parameters gets an emcee
 #: posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s
-#: (``max_seconds``). At 1 kHz dahl converged at 3000 steps (66 s) and lugre at 5500 (84 s), where 1000
-#: steps had left them at R-hat 1.04; the job took 18.5 min with them converged. Classic Bouc–Wen with
-#: a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a linear loading branch and a
-#: very stiff unloading one), where every evaluation needs ~26 sub-steps per 1-kHz sample and a step
-#: ~0.75 s: ~200 steps, NOT converged, and the headline says so. Selection is by the Laplace evidence
+#: (``max_seconds``). At 1 kHz, with the sampler's pilot-fitted independence move, dahl converged at 750
+#: steps (28 s) and lugre at 1250 (27 s) (DE alone: 3000 and 5500 steps, 66 and 84 s); the job took 16.2
+#: min. Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this record (a
+#: linear loading branch and a very stiff unloading one), where every evaluation needs ~26 sub-steps per
+#: 1-kHz sample and a step ~0.75 s: ~100 steps after its pilot, NOT converged, and the headline says so. Selection is by the Laplace evidence
 #: every form has; a thermodynamic-integration ladder per form (several minutes each on this record)
 #: does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for

@@ -68,7 +68,7 @@ import numpy as np
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged
-from .moves import MOVES, NEEDS_PROPOSAL, local_moves
+from .moves import MOVES, NEEDS_PROPOSAL, jittered_cholesky, local_moves
 
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
@@ -196,10 +196,7 @@ def initial_walkers(
     """
     center = np.asarray(center, float)
     d = center.size
-    cov = np.atleast_2d(np.asarray(cov, float))
-    # a tiny jitter keeps a singular covariance (an unidentified direction) drawable
-    jitter = 1e-12 * max(float(np.trace(cov)) / d, 1e-300)
-    L = np.linalg.cholesky(0.5 * (cov + cov.T) + jitter * np.eye(d))
+    L = jittered_cholesky(cov)
     coords = np.empty((n_walkers, d))
     lp = np.full(n_walkers, -np.inf)
     todo = np.arange(n_walkers)

@@ -32,13 +32,22 @@ class Snooker(emcee.moves.DESnookerMove):
         return q, log_factor
 
 
+def jittered_cholesky(cov) -> np.ndarray:
+    """Lower Cholesky factor of the symmetrised ``cov`` with a 1e-12 relative jitter on the diagonal,
+    so that a singular covariance (an unidentified direction) stays drawable."""
+    cov = np.atleast_2d(np.asarray(cov, float))
+    d = cov.shape[0]
+    jitter = 1e-12 * max(float(np.trace(cov)) / d, 1e-300)
+    return np.linalg.cholesky(0.5 * (cov + cov.T) + jitter * np.eye(d))
+
+
 class Independence(emcee.moves.MHMove):
     """Independence Metropolis–Hastings from a fixed multivariate t (emcee ``MHMove``).
 
     Every walker proposes x' ~ t_ν(μ, Σ) whatever its position, and accepts
     with min(1, p(x') q(x) / (p(x) q(x'))): the chain is exact for any fixed
-    q, and when q is close to the target (a Laplace approximation of a
-    posterior fitted to many samples) a proposal is accepted often and lands
+    q, and when q is close to the target (a Gaussian fitted to a pilot
+    chain of it, :func:`bayes_mr.inference.mcmc.sample`) a proposal is accepted often and lands
     anywhere in the posterior, so successive positions are nearly
     independent — an integrated time of a few steps where the local
     differential-evolution moves need tens. Where q is a poor fit (a curved
@@ -50,9 +59,9 @@ class Independence(emcee.moves.MHMove):
     Parameters
     ----------
     mean : ndarray (d,)
-        Centre μ of the proposal (e.g. the least-squares optimum).
+        Centre μ of the proposal (e.g. a pilot chain's mean).
     cov : ndarray (d, d)
-        Scale matrix Σ (e.g. the Laplace covariance).
+        Scale matrix Σ (e.g. that chain's covariance).
     df : float
         Degrees of freedom ν.
     """
@@ -60,9 +69,7 @@ class Independence(emcee.moves.MHMove):
     def __init__(self, mean, cov, df: float = 4.0):
         self.mean = np.asarray(mean, float)
         d = self.mean.size
-        cov = np.atleast_2d(np.asarray(cov, float))
-        jitter = 1e-12 * max(float(np.trace(cov)) / d, 1e-300)  # an unidentified direction stays drawable
-        self.chol = np.linalg.cholesky(0.5 * (cov + cov.T) + jitter * np.eye(d))
+        self.chol = jittered_cholesky(cov)
         self.df = float(df)
         super().__init__(self._propose, ndim=d)
 
