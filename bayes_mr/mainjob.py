@@ -111,7 +111,7 @@ class Budget:
     train_fraction: float = 0.6
     forms: tuple[str, ...] = tuple(FORMS)
     mcmc_max_params: int = 6
-    mcmc: MCMCSettings = field(default_factory=lambda: MCMCSettings(max_steps=3000, check_every=250))
+    mcmc: MCMCSettings = field(default_factory=lambda: MCMCSettings(max_steps=3000))
     evidence: str = "ti"
     ukf_lhs: int = 3
     ukf_taus: tuple[float, ...] = TAUS
@@ -139,12 +139,12 @@ class Budget:
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None, mcmc_max_params=5,
-              mcmc=MCMCSettings(max_steps=8000, max_seconds=150.0, check_every=250), evidence="laplace",
+              mcmc=MCMCSettings(max_steps=8000, max_seconds=150.0), evidence="laplace",
               ukf_lhs=2)
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_params=4,
-               mcmc=MCMCSettings(max_steps=500, check_every=250, min_tau_multiple=20.0, rhat_max=1.05),
+               mcmc=MCMCSettings(max_steps=500, min_tau_multiple=20.0, rhat_max=1.05),
                evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1))
 
 

@@ -45,10 +45,11 @@ def chi2_z(result, mu, P):
 def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     """5-d, scales over three decades, strong correlations; start off-centre and too wide.
 
-    |mean − truth|/MCSE < 2.33 per coordinate (MCSE = SD/√ESS), R-hat < 1.01,
+    |mean − truth|/MCSE < 2.88 in every coordinate (MCSE = SD/√ESS; family-wise 2 % over the five
+    for a calibrated MCSE — the next test checks that calibration over seeds), R-hat < 1.01,
     and the second moment right too: E[(x−μ)ᵀP(x−μ)] = d within 3 MCSE
     (a move that samples the wrong spread keeps the mean right — emcee
-    3.1.6's snooker does exactly that, see the next test).
+    3.1.6's snooker does exactly that, see the snooker test).
     """
     mu, C, P, log_prob = correlated_gaussian(5, seed=1)
     res = sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=7, progress=False))
@@ -56,10 +57,26 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     assert res.chain.shape[1:] == (20, 5)
     assert res.n_steps - res.burn >= 50 * res.tau.max()
     z = (res.mean() - mu) / res.mcse()
-    assert np.all(np.abs(z) < 2.33), z
+    assert np.all(np.abs(z) < 2.88), z
     assert np.all(res.rhat < 1.01), res.rhat
     assert abs(chi2_z(res, mu, P)) < 3.0
     assert 0.15 < res.acceptance.mean() < 0.6
+
+
+def test_monte_carlo_errors_are_calibrated_over_seeds():
+    """(mean − truth)/MCSE over 12 seeds × 5 coordinates of the target above has SD ≈ 1.
+
+    The stopping rule is checked every 50 steps, so a chain stops at the first check where its
+    own τ and R-hat say it may: if that made the MCSE optimistic (τ of a short chain is
+    underestimated), the z-scores would spread wider. Measured over 30 seeds: SD 0.99 with checks
+    every 50 steps, 0.98 every 250. 60 standard normals give an SD within [0.72, 1.3] with
+    probability > 0.999; pure DE's τ, underestimated, gave 1.3–1.4 on a 4-d target.
+    """
+    mu, C, _, log_prob = correlated_gaussian(5, seed=1)
+    z = [(r.mean() - mu) / r.mcse() for r in (
+        sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=s, progress=False))
+        for s in range(100, 112))]
+    assert 0.72 < float(np.std(z)) < 1.3, np.std(z)
 
 
 def test_independence_move_alone_is_exact_with_a_wrong_proposal():
