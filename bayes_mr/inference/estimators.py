@@ -84,7 +84,9 @@ class Emcee:
     Attributes
     ----------
     settings : MCMCSettings, optional
-        Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``).
+        Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``). With a wall-time
+        budget (``max_seconds``) a posterior projected not to meet the rule in it is not started:
+        :class:`~bayes_mr.inference.budget.OverBudget` says why (:func:`~bayes_mr.inference.budget.check_budget`).
     evidence : {"ti", "laplace", "tmcmc"}
         ``"ti"``: thermodynamic integration over a temperature ladder, with
         stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
@@ -108,12 +110,16 @@ class Emcee:
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Least squares, then the chain from its optimum, then the evidence routes."""
         from .evidence import evidence_routes, laplace_evidence, tmcmc_evidence
-        from .mcmc import MCMCSettings, fit_mcmc
+        from .budget import check_budget
+        from .mcmc import MCMCSettings, fit_mcmc, start_from_lsq
         from .mcmc_posterior import mcmc_posterior
         from .tmcmc import TMCMCSettings, run_tmcmc
 
         res = fit_lsq(likelihood, LSQSettings(seed=seed))
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
+        if settings.max_seconds is not None:  # a chain that cannot converge in its budget is not started
+            check_budget(likelihood, start_from_lsq(likelihood, res)[0], settings.walkers(likelihood.ndim),
+                         settings.pilot_length, settings.max_seconds)
         chain = fit_mcmc(likelihood, lsq=res, settings=settings)
         if self.evidence == "ti":
             with job_executor(self.executor) as ex:  # the ladder's rungs: on the cluster the fit runs on, if any

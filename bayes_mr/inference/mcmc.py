@@ -138,6 +138,11 @@ class MCMCSettings:
         if self.max_steps < 1 or self.check_every < 1:
             raise ValueError(f"max_steps and check_every must be positive, got {self.max_steps}, {self.check_every}")
 
+    @property
+    def pilot_length(self) -> int:
+        """Steps of the pilot :func:`sample` runs when given no proposal (0 when no move needs one)."""
+        return self.pilot_steps if any(name in NEEDS_PROPOSAL for name, _ in self.moves) else 0
+
     def walkers(self, ndim: int) -> int:
         """Number of walkers for a ``ndim``-dimensional target."""
         if self.n_walkers is None:

@@ -286,3 +286,24 @@ def test_crosscheck_z_scores_in_phi_and_theta():
     v = (2 * sd_true[0]) ** 2
     assert ds["mean_ukf_theta"].values[0] == pytest.approx(np.exp(ukf_mean[0] + v / 2))
     assert ds["sd_ukf_theta"].values[1] == pytest.approx(2 * sd_true[1] / coords.scale[1])
+
+
+def test_a_posterior_projected_past_its_budget_is_not_started():
+    """check_budget times one ensemble evaluation and projects the pilot plus MIN_CHAIN_STEPS steps: a
+    log-density that takes ≥ 20 ms per call projects ≥ 10 s, over a 5 s budget (OverBudget, with the numbers)
+    and within a 600 s one (the measured step is returned)."""
+    import time
+
+    from bayes_mr.inference.budget import MIN_CHAIN_STEPS, OverBudget, check_budget
+
+    calls = []
+
+    def slow(x):
+        calls.append(np.shape(x))
+        time.sleep(0.02)
+        return -0.5 * np.sum(np.atleast_2d(x) ** 2, axis=1)
+
+    with pytest.raises(OverBudget, match=f"{200 + MIN_CHAIN_STEPS}"):
+        check_budget(slow, np.zeros(3), 12, 200, 5.0)
+    assert check_budget(slow, np.zeros(3), 12, 200, 600.0) >= 0.02
+    assert calls == [(12, 3), (12, 3)]  # one evaluation of the whole ensemble each
