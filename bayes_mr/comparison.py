@@ -38,6 +38,7 @@ import xarray as xr
 from . import results
 from .executor import Outcome, run_jobs, share
 from .identify import Identify
+from .inference.budget import over_budget
 from .inference.estimators import engine
 from .inference.evidence_scale import LaplaceTerms, at_common_scale
 from .identify import validate as validate_fit
@@ -333,7 +334,9 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
         (m, e), n_done[0] = pairs[o.index], n_done[0] + 1
         row, idata = o.value if o.ok else ({"error": o.error}, None)
         if idata is None:
-            say(f"{m} × {e}: failed ({row['error']}) [{n_done[0]}/{len(pairs)}]")
+            why = over_budget(row["error"])
+            say(f"{m} × {e}: " + (f"not run ({why})" if why else f"failed ({row['error']})") +
+                f" [{n_done[0]}/{len(pairs)}]")
             return
         if out_dir is not None:
             results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")

@@ -50,7 +50,7 @@ from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shak
 from .identify import UKF, Emcee, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
 from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
-from .inference.budget import OverBudget
+from .inference.budget import over_budget
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -152,10 +152,6 @@ QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"), mcmc_max_param
                evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1))
 
 
-#: How a row's error begins when its posterior was projected over the budget (``executor.Outcome.error``).
-OVER_BUDGET = f"{OverBudget.__name__}: "
-
-
 def _engines_for(form: str, budget: Budget, kind: str) -> list[str]:
     n_free = len(get_model(form).free_names(kind))
     engines = ["lsq"]
@@ -181,10 +177,12 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
                              f"the job's time)")
         out = compare(part_a, [form], engines=engines, validate=part_b, seed=seed, progress=say,
                       estimators=estimators, noise=budget.noise)
-        over = [r for r in out["rows"] if str(r.get("error", "")).startswith(OVER_BUDGET)]
-        for r in over:  # not a failure: a posterior the budget could not converge, not started (budget.py)
-            skipped[form] = r["error"][len(OVER_BUDGET):]
-        rows += [r for r in out["rows"] if r not in over]
+        for r in out["rows"]:
+            why = over_budget(r.get("error"))
+            if why:  # not a failure: a posterior the budget could not converge, not started (budget.py)
+                skipped[form] = why
+            else:
+                rows.append(r)
         fits.update(out["idata"])
         for (m, e), idata in out["idata"].items():
             results.save(idata, out_dir / "fits" / f"{m.replace('+', '_')}__{e}.nc")

@@ -27,6 +27,13 @@ class OverBudget(RuntimeError):
     """A posterior not started: its projected wall time exceeds its budget (the message has the numbers)."""
 
 
+def over_budget(error: str | None) -> str | None:
+    """The reason of a job's error (``"ExceptionType: message"``, :class:`bayes_mr.executor.Outcome`) if it is
+    an :class:`OverBudget` (a posterior deliberately not run, not a failure), else None."""
+    prefix = f"{OverBudget.__name__}: "
+    return error[len(prefix):] if error and error.startswith(prefix) else None
+
+
 def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int, max_seconds: float) -> float:
     """Seconds of one ensemble step at ``center``; raise :class:`OverBudget` if the run cannot fit.
 

@@ -294,7 +294,7 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
     and within a 600 s one (the measured step is returned)."""
     import time
 
-    from bayes_mr.inference.budget import MIN_CHAIN_STEPS, OverBudget, check_budget
+    from bayes_mr.inference.budget import MIN_CHAIN_STEPS, OverBudget, check_budget, over_budget
 
     calls = []
 
@@ -307,3 +307,6 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
         check_budget(slow, np.zeros(3), 12, 200, 5.0)
     assert check_budget(slow, np.zeros(3), 12, 200, 600.0) >= 0.02
     assert calls == [(12, 3), (12, 3)]  # one evaluation of the whole ensemble each
+    # a job's error string (executor.Outcome) names it: the main job lists it as not run, not as failed
+    assert over_budget("OverBudget: one step …") == "one step …"
+    assert over_budget("ValueError: OverBudget: no") is None and over_budget(None) is None
