@@ -132,9 +132,9 @@ class Budget:
 #: posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s
 #: (``max_seconds``), unless one step at its least-squares optimum projects the pilot and a minimal
 #: chain past those 150 s (:mod:`bayes_mr.inference.budget`; the headline names it and gives the
-#: numbers). With the sampler's pilot-fitted independence move dahl converged at 750 steps (28 s) and
-#: lugre at 1250 (27 s) (DE alone: 3000 and 5500 steps, 66 and 84 s; both before the pilot was cut to
-#: 200 steps). Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
+#: numbers). With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
+#: dahl converged at 450 steps (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and
+#: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
 #: record (a linear loading branch and a very stiff unloading one), where every evaluation needs ~26
 #: sub-steps per 1-kHz sample and a step ~0.7 s: run to its 150 s it stopped ~100 steps after its
 #: pilot, NOT converged, so the projection now leaves it out and says why. Selection is by the Laplace evidence
