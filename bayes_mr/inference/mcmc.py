@@ -27,7 +27,9 @@ evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and the DE snooker upda
 (10 %, :class:`~bayes_mr.inference.moves.Snooker`). Without a ``proposal`` the
 run starts with a pilot of ``pilot_steps`` steps of the other moves alone; the
 mean and covariance of its second half, frozen from then on (a fixed
-proposal keeps the chain exact), make the proposal, and the chain proper
+proposal keeps the chain exact), make the proposal — a coordinate piled
+against a bound of the box in log-distance to it (``bounds``;
+normalized-bouc-wen's n on the compare record: τ 10 → 5) — and the chain proper
 starts from the pilot's last walkers (the pilot is not part of the result).
 Measured on the bench's dahl posterior (6-d, 24 walkers, 25 s at 1 kHz):
 integrated time 21–24 steps with DE + snooker (3000 steps, 54 s) and 3.0–3.4
@@ -73,7 +75,7 @@ import numpy as np
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged
-from .moves import MOVES, NEEDS_PROPOSAL, jittered_cholesky, local_moves
+from .moves import MOVES, NEEDS_PROPOSAL, fit_proposal, jittered_cholesky, local_moves
 
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
@@ -153,10 +155,10 @@ class MCMCSettings:
                              f"(red–blue half-ensembles spanning the space), got {n}")
         return n
 
-    def make_moves(self, proposal: tuple[np.ndarray, np.ndarray] | None = None) -> list:
+    def make_moves(self, proposal: tuple | None = None) -> list:
         """Fresh emcee move objects (moves keep per-run state; never share them).
 
-        ``proposal`` is the (mean, cov) of the moves that need one (the independence move).
+        ``proposal`` is the (mean, cov[, edges]) of the moves that need one (the independence move).
         """
         moves = []
         for name, w in self.moves:
@@ -234,7 +236,8 @@ def sample(
     names: Sequence[str] | None = None,
     initial: np.ndarray | None = None,
     group: str = "mcmc",
-    proposal: tuple[np.ndarray, np.ndarray] | None = None,
+    proposal: tuple | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> MCMCResult:
     """Sample a vectorised log-density with emcee until the stopping rule holds.
 
@@ -255,19 +258,16 @@ def sample(
     group : str
         HDF5 group of the chain inside ``settings.backend`` (several chains
         can share one file, e.g. the temperatures of an evidence ladder).
-    proposal : (ndarray (d,), ndarray (d, d)), optional
-        Mean and scale of the independence move's fixed proposal (default:
-        fitted to a pilot chain, module docstring).
+    proposal : (mean (d,), cov (d, d)[, edges]), optional
+        The independence move's fixed proposal (:class:`~.moves.Independence`; default: fitted to a pilot).
+    bounds : (ndarray (d,), ndarray (d,)), optional
+        The support's box, for the pilot's fit (:func:`~.moves.fit_proposal`).
 
     Returns
     -------
     MCMCResult
-
-    Notes
-    -----
-    With ``settings.resume`` and an existing checkpoint the chain continues
-    from its last stored step and random state; the seed and walker count
-    must match the checkpoint's.
+        With ``settings.resume`` and a checkpoint, the chain continued from its last stored step and
+        random state (the seed and walker count must match the checkpoint's).
     """
     t0 = _time.perf_counter()
     x0_center = np.asarray(x0_center, float)
@@ -275,7 +275,8 @@ def sample(
     names = tuple(names) if names is not None else tuple(f"x{j}" for j in range(d))
     pilot_steps = 0
     if proposal is None and any(name in NEEDS_PROPOSAL for name, _ in settings.moves):
-        initial, proposal, pilot_steps, settings = _pilot(log_prob, x0_center, x0_cov, settings, names, initial, group)
+        initial, proposal, pilot_steps, settings = _pilot(log_prob, x0_center, x0_cov, settings, names, initial, group,
+                                                          bounds)
     n_walkers = settings.walkers(d) if initial is None else int(np.shape(initial)[0])
     init_rng, move_state, entropy = run_seeds(settings.seed)
     backend, resuming = open_backend(settings, group, (n_walkers, d), entropy)
@@ -307,7 +308,7 @@ def sample(
     )
 
 
-def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, group: str):
+def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, group: str, bounds=None):
     """Run the pilot chain (the moves that need no proposal) and fit the proposal to its second half.
 
     Its seed is a fixed child of the run's, and it has its own HDF5 group
@@ -317,7 +318,8 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     -------
     initial : ndarray (n_walkers, d)
         The pilot's last walkers (where the chain proper starts).
-    proposal : (ndarray (d,), ndarray (d, d))
+    proposal : tuple
+        (mean, cov[, edges]) of :func:`~bayes_mr.inference.moves.fit_proposal`.
     pilot_steps : int
     settings : MCMCSettings
         The chain's settings, its wall-time budget less the pilot's (which may spend at most half of it).
@@ -333,7 +335,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     x = pilot.chain[pilot.n_steps // 2:].reshape(-1, pilot.chain.shape[-1])
     if settings.max_seconds is not None:
         settings = replace(settings, max_seconds=max(settings.max_seconds - pilot.wall_s, 0.0))
-    return pilot.chain[-1], (x.mean(axis=0), np.cov(x, rowvar=False)), pilot.n_steps, settings
+    return pilot.chain[-1], fit_proposal(x, bounds), pilot.n_steps, settings
 
 
 #: Spawn key of the pilot chain's seed (a child no ``SeedSequence.spawn`` of the run's seed gives).
@@ -420,5 +422,5 @@ def fit_mcmc(lik, *, lsq=None, settings: MCMCSettings = MCMCSettings(), lsq_sett
 
         lsq = fit_lsq(lik, lsq_settings or LSQSettings(seed=settings.seed))
     center, cov = start_from_lsq(lik, lsq)
-    return sample(lik, center, cov, settings, names=lik.names)
+    return sample(lik, center, cov, settings, names=lik.names, bounds=(lik.lower, lik.upper))
 

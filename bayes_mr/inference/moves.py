@@ -44,46 +44,104 @@ def jittered_cholesky(cov) -> np.ndarray:
 class Independence(emcee.moves.MHMove):
     """Independence Metropolis–Hastings from a fixed multivariate t (emcee ``MHMove``).
 
-    Every walker proposes x' ~ t_ν(μ, Σ) whatever its position, and accepts
+    Every walker proposes x' ~ q whatever its position, and accepts
     with min(1, p(x') q(x) / (p(x) q(x'))): the chain is exact for any fixed
-    q, and when q is close to the target (a Gaussian fitted to a pilot
+    q, and when q is close to the target (fitted to a pilot
     chain of it, :func:`bayes_mr.inference.mcmc.sample`) a proposal is accepted often and lands
     anywhere in the posterior, so successive positions are nearly
     independent — an integrated time of a few steps where the local
     differential-evolution moves need tens. Where q is a poor fit (a curved
-    valley, a posterior piled against a bound) it is rejected more often
-    and the ensemble's DE moves carry the chain. The t tails (ν = 4) keep
-    the importance ratio p/q bounded where a Gaussian q would be lighter
-    tailed than the target.
+    valley) it is rejected more often and the ensemble's DE moves carry the
+    chain. The t tails (ν = 4) keep the importance ratio p/q bounded where a
+    Gaussian q would be lighter tailed than the target.
+
+    A coordinate piled against a bound of the prior box (an effect's
+    parameter at "off", n of Bouc–Wen at 1) has a skewed, exponential-like
+    marginal no symmetric q fits; ``edges`` proposes it as u = ln(x − lower)
+    (or ln(upper − x)) instead, with the Jacobian in q, so its proposals stay
+    inside the box and follow the skew (:func:`fit_proposal`).
 
     Parameters
     ----------
     mean : ndarray (d,)
-        Centre μ of the proposal (e.g. a pilot chain's mean).
+        Centre μ of the t, in the proposal's coordinates (u where ``edges`` transforms).
     cov : ndarray (d, d)
-        Scale matrix Σ (e.g. that chain's covariance).
+        Scale matrix Σ of the t, same coordinates.
+    edges : (ndarray (d,), ndarray (d,), ndarray (d,) of int), optional
+        (lower, upper, side): side −1 proposes ln(x − lower), +1 ln(upper − x), 0 x itself.
     df : float
         Degrees of freedom ν.
     """
 
-    def __init__(self, mean, cov, df: float = 4.0):
+    def __init__(self, mean, cov, edges=None, df: float = 4.0):
         self.mean = np.asarray(mean, float)
         d = self.mean.size
         self.chol = jittered_cholesky(cov)
         self.df = float(df)
+        self.edges = None if edges is None or not np.any(edges[2]) else tuple(np.asarray(e) for e in edges)
         super().__init__(self._propose, ndim=d)
 
     def log_density(self, x: np.ndarray) -> np.ndarray:
-        """ln q(x) up to a constant, for x of shape (n, d)."""
-        u = np.linalg.solve(self.chol, (np.atleast_2d(x) - self.mean).T)
-        return -0.5 * (self.df + self.mean.size) * np.log1p(np.sum(u * u, axis=0) / self.df)
+        """ln q(x) up to a constant, for x of shape (n, d) (in the target's coordinates)."""
+        x = np.atleast_2d(x)
+        u, log_jac = to_edge_coords(x, self.edges)
+        z = np.linalg.solve(self.chol, (u - self.mean).T)
+        return -0.5 * (self.df + self.mean.size) * np.log1p(np.sum(z * z, axis=0) / self.df) + log_jac
 
     def _propose(self, x0, random):
         n, d = x0.shape
         z = random.randn(n, d) @ self.chol.T
         w = np.sqrt(random.chisquare(self.df, n) / self.df)
-        q = self.mean + z / w[:, None]
+        q = from_edge_coords(self.mean + z / w[:, None], self.edges)
         return q, self.log_density(x0) - self.log_density(q)
+
+
+def to_edge_coords(x: np.ndarray, edges) -> tuple[np.ndarray, np.ndarray]:
+    """u of :class:`Independence` (ln of the distance to the edge where side ≠ 0) and ln |du/dx| per row."""
+    if edges is None:
+        return x, np.zeros(x.shape[0])
+    lower, upper, side = edges
+    u = np.array(x, float, copy=True)
+    gap = np.where(side < 0, x - lower, upper - x)[:, side != 0]
+    gap = np.maximum(gap, 1e-300)  # a walker on the bound itself: q finite, the Hastings ratio tiny
+    u[:, side != 0] = np.log(gap)
+    return u, -np.sum(np.log(gap), axis=1)
+
+
+def from_edge_coords(u: np.ndarray, edges) -> np.ndarray:
+    """x from the proposal coordinates u (inverse of :func:`to_edge_coords`)."""
+    if edges is None:
+        return u
+    lower, upper, side = edges
+    x = np.array(u, float, copy=True)
+    lo, hi = side < 0, side > 0
+    x[:, lo] = lower[lo] + np.exp(u[:, lo])
+    x[:, hi] = upper[hi] - np.exp(u[:, hi])
+    return x
+
+
+#: A pilot's marginal whose mean is closer than this many of its SDs to a bound of the box is proposed in
+#: log-distance to it (:class:`Independence`). Measured on normalized-bouc-wen's posterior on the bench's
+#: compare record (n's marginal: mean ≈ SD from its bound, skew 2.1): acceptance 0.33 → 0.44, τ 10.4 → 4.9,
+#: 1300 → 650 steps, the same means and SDs.
+EDGE_SDS = 3.0
+
+
+def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
+    """(mean, cov[, edges]) of :class:`Independence` fitted to pilot draws x (n, d) within the box ``bounds``."""
+    x = np.asarray(x, float)
+    if bounds is None:
+        return x.mean(axis=0), np.cov(x, rowvar=False)
+    lower, upper = (np.asarray(b, float) for b in bounds)
+    m, sd = x.mean(axis=0), x.std(axis=0)
+    near_lo, near_hi = m - lower < EDGE_SDS * sd, upper - m < EDGE_SDS * sd
+    side = np.where(near_lo & (~near_hi | (m - lower <= upper - m)), -1, np.where(near_hi, 1, 0))
+    side[sd <= 0] = 0
+    if not np.any(side):
+        return m, np.cov(x, rowvar=False)
+    edges = (lower, upper, side)
+    u, _ = to_edge_coords(x, edges)
+    return u.mean(axis=0), np.cov(u, rowvar=False), edges
 
 
 #: Move names accepted in :attr:`MCMCSettings.moves`. ``emcee_snooker`` is emcee 3.1.6's biased
@@ -95,7 +153,7 @@ MOVES = {
     "emcee_snooker": emcee.moves.DESnookerMove,
     "independence": Independence,
 }
-#: Moves built from a proposal Gaussian (mean, cov) rather than from nothing.
+#: Moves built from a fitted proposal (mean, cov[, edges]: :func:`fit_proposal`) rather than from nothing.
 NEEDS_PROPOSAL = ("independence",)
 
 

@@ -310,3 +310,44 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
     # a job's error string (executor.Outcome) names it: the main job lists it as not run, not as failed
     assert over_budget("OverBudget: one step …") == "one step …"
     assert over_budget("ValueError: OverBudget: no") is None and over_budget(None) is None
+
+
+def _piled_target():
+    """A 2-d target piled against the box's lower bound in x₀: p ∝ exp(−x₀ − ½(x₁ − ½x₀)²) on [0, 30] × [−30, 30].
+
+    x₀ ~ Exponential(1) (mean 1, SD 1), x₁ | x₀ ~ N(x₀/2, 1): E[x₁] = ½, Var[x₁] = 1.25.
+    """
+    lower, upper = np.array([0.0, -30.0]), np.array([30.0, 30.0])
+
+    def log_prob(X):
+        X = np.atleast_2d(X)
+        inside = np.all((X >= lower) & (X <= upper), axis=1)
+        lp = -X[:, 0] - 0.5 * (X[:, 1] - 0.5 * X[:, 0]) ** 2
+        return np.where(inside, lp, -np.inf)
+
+    return log_prob, lower, upper, np.array([1.0, 0.5]), np.array([1.0, 1.25])
+
+
+def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stays_exact():
+    """fit_proposal marks x₀ (mean one SD from its bound) and proposes it as ln x₀; with the Jacobian in q
+    the chain of the independence move alone — from a proposal fitted off (centre and scale wrong) — keeps
+    the target's means and variances within MC error, and the default run with ``bounds`` does too.
+    Checked by mutation: with the Jacobian term dropped from q this test fails."""
+    from bayes_mr.inference.moves import fit_proposal
+
+    log_prob, lower, upper, mean, var = _piled_target()
+    rng = np.random.default_rng(0)
+    x0 = rng.exponential(1.0, 4000)
+    draws = np.column_stack([x0, 0.5 * x0 + rng.standard_normal(4000)])
+    m_u, cov_u, edges = fit_proposal(draws, (lower, upper))
+    assert list(edges[2]) == [-1, 0]
+    off = (m_u + np.array([0.3, -0.3]), cov_u * 1.6)
+    alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, edges),
+                   settings=MCMCSettings(seed=3, progress=False, moves=(("independence", 1.0),)))
+    default = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, MCMCSettings(seed=3, progress=False),
+                     bounds=(lower, upper))
+    for res in (alone, default):
+        assert res.converged
+        assert np.all(np.abs((res.mean() - mean) / res.mcse()) < 2.88), (res.mean(), res.mcse())
+        post = res.chain[res.burn:].reshape(-1, 2)
+        assert np.all(np.abs(post.var(axis=0) / var - 1) < 0.15), post.var(axis=0)
