@@ -335,7 +335,7 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
         row, idata = o.value if o.ok else ({"error": o.error}, None)
         if idata is None:
             why = over_budget(row["error"])
-            say(f"{m} × {e}: " + (f"not run ({why})" if why else f"failed ({row['error']})") +
+            say(f"{m} × {e}: " + (why if why else f"failed ({row['error']})") +  # why ends "not run"
                 f" [{n_done[0]}/{len(pairs)}]")
             return
         if out_dir is not None:

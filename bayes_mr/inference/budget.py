@@ -19,7 +19,7 @@ import numpy as np
 
 #: Steps of the chain proper (after the pilot) the projection counts: the fewest the rule has held in.
 #: Measured with the pilot-fitted independence move and a check every 50 steps: the bench's dahl
-#: posterior 300–600 steps over six seeds, lugre 900, normalized-bouc-wen 1250 (30 s records at 1 kHz).
+#: posterior 300–600 steps over six seeds, lugre 550, normalized-bouc-wen 600 (30 s records at 1 kHz).
 MIN_CHAIN_STEPS = 300
 
 
