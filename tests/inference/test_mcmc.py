@@ -69,8 +69,8 @@ def test_monte_carlo_errors_are_calibrated_over_seeds():
     The stopping rule is checked every 50 steps, so a chain stops at the first check where its
     own τ and R-hat say it may: if that made the MCSE optimistic (τ of a short chain is
     underestimated), the z-scores would spread wider. Measured over 30 seeds: SD 0.99 with checks
-    every 50 steps, 0.98 every 250. 60 standard normals give an SD within [0.72, 1.3] with
-    probability > 0.999; pure DE's τ, underestimated, gave 1.3–1.4 on a 4-d target.
+    every 50 steps, 0.98 every 250. 60 independent standard normals give an SD within [0.72, 1.3]
+    with probability ≈ 0.998 (its SD is ≈ 0.09); pure DE's τ, underestimated, gave 1.3–1.4 on a 4-d target.
     """
     mu, C, _, log_prob = correlated_gaussian(5, seed=1)
     z = [(r.mean() - mu) / r.mcse() for r in (
