@@ -274,7 +274,7 @@ def sample(
     d = x0_center.size
     names = tuple(names) if names is not None else tuple(f"x{j}" for j in range(d))
     pilot_steps = 0
-    if proposal is None and any(name in NEEDS_PROPOSAL for name, _ in settings.moves):
+    if proposal is None and settings.pilot_length:
         initial, proposal, pilot_steps, settings = _pilot(log_prob, x0_center, x0_cov, settings, names, initial, group,
                                                           bounds)
     n_walkers = settings.walkers(d) if initial is None else int(np.shape(initial)[0])

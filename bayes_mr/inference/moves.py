@@ -136,7 +136,6 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
     m, sd = x.mean(axis=0), x.std(axis=0)
     near_lo, near_hi = m - lower < EDGE_SDS * sd, upper - m < EDGE_SDS * sd
     side = np.where(near_lo & (~near_hi | (m - lower <= upper - m)), -1, np.where(near_hi, 1, 0))
-    side[sd <= 0] = 0
     if not np.any(side):
         return m, np.cov(x, rowvar=False)
     edges = (lower, upper, side)

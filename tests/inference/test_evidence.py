@@ -105,7 +105,7 @@ def test_power_posterior_ti_matches_the_analytic_evidence_with_its_ladder_error(
     assert within(ti, log_z), (ti.log_z - log_z, ti.mc_error, ti.ladder_error)
     assert ti.ladder_error > ti.mc_error
     assert ti.total_error < 0.6
-    # the plain trapezoid alone would be off by several of its Monte Carlo errors (2.99 with seed 6)
+    # the plain trapezoid alone would be off by several of its Monte Carlo errors (2.77 with seed 6 and the current sampler)
     assert abs(ti.details["trapezoid"] - log_z) > 2.5 * ti.mc_error
 
 
