@@ -28,8 +28,9 @@ evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and the DE snooker upda
 run starts with a pilot of ``pilot_steps`` steps of the other moves alone; the
 mean and covariance of its second half, frozen from then on (a fixed
 proposal keeps the chain exact), make the proposal — a coordinate piled
-against a bound of the box in log-distance to it (``bounds``;
-normalized-bouc-wen's n on the compare record: τ 10 → 5) — and the chain proper
+against a bound of the box in log-distance to it where that fits the pilot
+jointly better (``bounds``; normalized-bouc-wen's n on the compare record:
+τ 10 → 5; :func:`~bayes_mr.inference.moves.fit_proposal`) — and the chain proper
 starts from the pilot's last walkers (the pilot is not part of the result).
 Measured on the bench's dahl posterior (6-d, 24 walkers, 25 s at 1 kHz):
 integrated time 21–24 steps with DE + snooker (3000 steps, 54 s) and 3.0–3.4

@@ -328,6 +328,32 @@ def _piled_target():
     return log_prob, lower, upper, np.array([1.0, 0.5]), np.array([1.0, 1.25])
 
 
+def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
+    """fit_proposal moves a coordinate near a bound to log-distance only where the joint Gaussian fits the
+    pilot better there. A Gaussian 2.5 SDs from its bound (inside EDGE_SDS) stays in x; marginals piled
+    against either bound move; a piled marginal that moves in step with another coordinate (correlation
+    0.99, as the Bouc–Wen benchmark's n with β₁ and γ) stays in x — alone it would move."""
+    from bayes_mr.inference.moves import EDGE_SDS, fit_proposal
+
+    rng = np.random.default_rng(1)
+    lower, upper = np.zeros(3), np.full(3, 10.0)
+    gauss = 2.5 + rng.standard_normal(5000)  # mean 2.5 SDs above the lower bound, inside EDGE_SDS
+    gauss = gauss[gauss > 0.0][:4000]  # a pilot's draws are inside the box
+    assert 2.5 < EDGE_SDS
+    piled_lo = rng.exponential(1.0, 4000)
+    piled_hi = 10.0 - rng.exponential(0.5, 4000)
+    out = fit_proposal(np.column_stack([gauss, piled_lo, piled_hi]), (lower, upper))
+    assert len(out) == 3 and list(out[2][2]) == [0, -1, 1]
+    assert len(fit_proposal(gauss[:, None], (lower[:1], upper[:1]))) == 2  # nothing moved: the plain fit
+
+    half = rng.exponential(1.0, 4000)  # piled against 0
+    along = 2.0 * half + 0.2 * rng.standard_normal(4000)
+    assert np.corrcoef(half, along)[0, 1] > 0.98
+    box = (np.array([0.0, -30.0]), np.array([10.0, 30.0]))
+    assert len(fit_proposal(np.column_stack([half, along]), box)) == 2
+    assert list(fit_proposal(half[:, None], (box[0][:1], box[1][:1]))[2][2]) == [-1]
+
+
 def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stays_exact():
     """fit_proposal marks x₀ (mean one SD from its bound) and proposes it as ln x₀; with the Jacobian in q
     the chain of the independence move alone — from a proposal fitted off (centre and scale wrong) — keeps
