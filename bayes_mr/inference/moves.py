@@ -56,10 +56,10 @@ class Independence(emcee.moves.MHMove):
     Gaussian q would be lighter tailed than the target.
 
     A coordinate piled against a bound of the prior box (an effect's
-    parameter at "off", n of Bouc–Wen at 1) has a skewed, exponential-like
-    marginal no symmetric q fits; ``edges`` proposes it as u = ln(x − lower)
-    (or ln(upper − x)) instead, with the Jacobian in q, so its proposals stay
-    inside the box and follow the skew (:func:`fit_proposal`).
+    parameter at "off") has a skewed, exponential-like marginal no symmetric
+    q fits; ``edges`` proposes it as u = ln(x − lower) (or ln(upper − x))
+    instead, with the Jacobian in q, so its proposals stay inside the box and
+    follow the skew (:func:`fit_proposal` decides which, if any).
 
     Parameters
     ----------
@@ -157,15 +157,17 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
     m, sd = x.mean(axis=0), x.std(axis=0)
     near_lo, near_hi = m - lower < EDGE_SDS * sd, upper - m < EDGE_SDS * sd
     near = np.where(near_lo & (~near_hi | (m - lower <= upper - m)), -1, np.where(near_hi, 1, 0))
+    # every near column in log-distance once; a column's mean ln |du/dx| is −mean(u) there
+    u_near, _ = to_edge_coords(x, (lower, upper, near))
+    mean_log_jac = -u_near.mean(axis=0)
     side = np.zeros_like(near)
     best = _gaussian_fit(x)
     while np.isfinite(best):  # a singular pilot (a coordinate that never moved) moves nothing
         gains = {}
         for j in np.flatnonzero((near != 0) & (side == 0)):
-            trial = side.copy()
-            trial[j] = near[j]
-            u, log_jac = to_edge_coords(x, (lower, upper, trial))
-            gains[j] = _gaussian_fit(u) + np.mean(log_jac) - best
+            trial = side != 0
+            trial[j] = True
+            gains[j] = _gaussian_fit(np.where(trial, u_near, x)) + mean_log_jac[trial].sum() - best
         if not gains or max(gains.values()) <= 0.0:
             break
         j = max(gains, key=gains.get)
@@ -173,9 +175,8 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
         best += gains[j]
     if not np.any(side):
         return m, np.cov(x, rowvar=False)
-    edges = (lower, upper, side)
-    u, _ = to_edge_coords(x, edges)
-    return u.mean(axis=0), np.cov(u, rowvar=False), edges
+    u = np.where(side != 0, u_near, x)
+    return u.mean(axis=0), np.cov(u, rowvar=False), (lower, upper, side)
 
 
 #: Move names accepted in :attr:`MCMCSettings.moves`. ``emcee_snooker`` is emcee 3.1.6's biased
