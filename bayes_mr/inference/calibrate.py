@@ -34,7 +34,8 @@ never narrows what the data's own residual says.
 Every engine reads it: least squares reports it as ``cov_phi``; the MCMC
 draws are adjusted to it (:func:`adjust_draws`: an affine map about the
 posterior mode whose image has this covariance, the curvature adjustment of
-Ribatet, Cooley & Davison 2012 and Shaby 2014). The UKF does not use it: its
+Ribatet, Cooley & Davison 2012 and Shaby 2014) and kept inside the prior's box
+(:func:`truncate_to_box`). The UKF does not use it: its
 filter carries the input noise as process noise, and it reports its own
 covariance plus its offset from the likelihood's peak (``UKF.peak_nfev`` in
 ``inference/estimators.py``). Measured by ``studies/coverage.py``.
@@ -240,6 +241,28 @@ def prior_on_unseen(cov: np.ndarray, info: np.ndarray, widths: np.ndarray) -> np
     return cov + (v @ v.T) / 12.0
 
 
+def within_prior(cov: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """``cov`` [φ²] with no direction wider than the prior's box: SD at most one box width.
+
+    A direction the record barely sees (a stiffness pinned at its lower bound,
+    where it moves the output by nothing) has a tiny but nonzero information, so
+    :func:`prior_on_unseen` keeps it and its pseudo-inverse variance can be
+    10⁶ box widths squared. The posterior there is the prior (uniform on the
+    box); a Gaussian of that variance truncated to the box draws almost nothing
+    inside it. In the box's scaled frame (φ / width) every eigenvalue of the
+    covariance is capped at 1 — an SD of one box width, whose Gaussian
+    truncated to the box is within a factor e^-½ of uniform across it — and every
+    direction the record determines (variance far below the box) is untouched.
+    """
+    d = np.asarray(widths, float)
+    scaled = cov / d[:, None] / d[None, :]
+    w, u = np.linalg.eigh(0.5 * (scaled + scaled.T))
+    if w.max() <= 1.0:
+        return cov
+    capped = (u * np.minimum(w, 1.0)) @ u.T
+    return d[:, None] * capped * d[None, :]
+
+
 def sandwich(J: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """B⁻¹ Ω B⁻¹ with B = JᵀJ (pseudo-inverse) [φ²]."""
     bread = np.linalg.pinv(J.T @ J)
@@ -267,6 +290,30 @@ def adjust_draws(phi: np.ndarray, center: np.ndarray, cov_model: np.ndarray, cov
     A = half_t @ inv_half_m
     c = np.asarray(center, float)
     return c + (np.asarray(phi, float) - c) @ A.T
+
+
+def truncate_to_box(phi: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                    rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """Adjusted draws (W, n, p) restricted to the prior's box, and the fraction that fell outside.
+
+    The calibrated posterior is the adjusted likelihood times the prior; with
+    the uniform box prior of :meth:`~bayes_mr.likelihood.OutputError.log_prior`
+    that is the adjusted draws truncated to the box. A draw the map carried out
+    of it (a direction the data barely constrain, whose calibrated variance
+    exceeds the box) is replaced by one drawn at random from the draws inside,
+    so the array keeps its (walker, draw) shape. With no draw inside (a map
+    that moved everything out) the draws are returned as they are with
+    fraction 1.0, for the caller to report.
+    """
+    phi = np.asarray(phi, float)
+    flat = phi.reshape(-1, phi.shape[-1])
+    inside = np.all((flat >= lower) & (flat <= upper), axis=1)
+    n_out = int(np.count_nonzero(~inside))
+    if n_out == 0 or n_out == inside.size:
+        return phi, n_out / inside.size
+    out = flat.copy()
+    out[~inside] = flat[inside][rng.integers(0, inside.sum(), size=n_out)]
+    return out.reshape(phi.shape), n_out / inside.size
 
 
 def describe(res, channels: tuple[str, ...]) -> dict:

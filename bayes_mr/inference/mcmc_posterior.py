@@ -6,7 +6,7 @@ import numpy as np
 import xarray as xr
 
 from .base import Posterior, even_indices
-from .calibrate import adjust_draws, describe, loewner_max
+from .calibrate import adjust_draws, describe, loewner_max, truncate_to_box
 from .evidence import Evidence, select_route
 from .evidence_scale import calibration_info
 from .mcmc import MCMCResult
@@ -37,7 +37,9 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         Draws (chain = walker, draw) from the post-burn-in chain thinned by
         ``result.thin`` — with ``lsq``, mapped about its optimum from their own
         covariance to the larger (Loewner) of it and least squares' calibrated
-        one (:func:`~bayes_mr.inference.calibrate.adjust_draws`; ``lp`` stays the sampled draws' log posterior); the point is the maximum-posterior step after burn-in;
+        one (:func:`~bayes_mr.inference.calibrate.adjust_draws`; ``lp`` stays the sampled draws' log posterior) and
+        truncated to the prior's box (:func:`~bayes_mr.inference.calibrate.truncate_to_box`; the fraction
+        outside is ``uncertainty.draws_outside_prior``); the point is the maximum-posterior step after burn-in;
         ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate.
     """
     p = lik.n_params
@@ -51,7 +53,12 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         # (a curved ridge) that curvature's inverse would amplify the tail, and the chain is never narrowed
         x = x.copy()
         cov_chain = np.atleast_2d(np.cov(x[..., :p].reshape(-1, p), rowvar=False))
-        x[..., :p] = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
+        mapped = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
+        # ... times the prior: the map can carry draws along a barely constrained direction out of the box
+        rng = np.random.default_rng(int(result.seed_entropy) if str(result.seed_entropy).isdigit() else 0)
+        mapped, outside = truncate_to_box(mapped, lik.phi_lo, lik.phi_hi, rng)
+        if outside < 1.0:  # else the map left the box entirely: keep the chain's own draws, and say so
+            x[..., :p] = mapped
     # the point the engine stands behind: the highest posterior density visited after burn-in
     post_lp = result.log_prob[result.burn:]
     i, w = np.unravel_index(int(np.argmax(post_lp)), post_lp.shape)
@@ -74,7 +81,9 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)
-        info["uncertainty"] = {**describe(lsq, lik.channels), "draws": "mapped to least squares' covariance"}
+        info["uncertainty"] = {**describe(lsq, lik.channels), "draws_outside_prior": outside,
+                               "draws": "mapped to least squares' covariance" if outside < 1.0 else
+                               "the chain's own (every mapped draw left the prior box)"}
         info.update(calibration_info(lsq.evidence_terms))  # the Laplace route's calibrated evidence (evidence_scale)
     names = list(lik.names)
     return Posterior(

@@ -7,8 +7,9 @@ RMS noise on the measured input and on the outputs, truths drawn around the thes
 
 import numpy as np
 import pytest
+from scipy import stats
 
-from bayes_mr.inference.calibrate import adjust_draws, input_noise_sd, loewner_max
+from bayes_mr.inference.calibrate import adjust_draws, input_noise_sd, loewner_max, truncate_to_box, within_prior
 from bayes_mr.inference.estimators import UKF, LeastSquares
 from bayes_mr.inference.lsq import LSQSettings
 from bayes_mr.likelihood import OutputError
@@ -81,6 +82,43 @@ def test_adjusted_draws_have_the_target_covariance_and_keep_the_centre():
     assert np.allclose(np.cov(out.T), target, rtol=0.02, atol=0.02)
     assert np.allclose(out.mean(axis=0), [1.0, -2.0], atol=0.02)
     assert np.allclose(adjust_draws(draws, np.zeros(2), model, model), draws)
+
+
+def test_draws_mapped_out_of_the_prior_box_give_the_truncated_posterior():
+    """A calibrated SD wider than the box (a barely identified direction) must not leave the prior's support:
+    the adjusted likelihood times the uniform box prior is the mapped normal truncated to the box."""
+    rng = np.random.default_rng(3)
+    draws = rng.normal(0.0, 1.0, size=(8, 20_000, 2))
+    mapped = adjust_draws(draws, np.zeros(2), np.eye(2), np.diag([1.0, 25.0]))
+    lo, hi = np.array([-10.0, -2.0]), np.array([10.0, 4.0])
+    out, frac = truncate_to_box(mapped, lo, hi, np.random.default_rng(4))
+    assert out.shape == mapped.shape and np.all((out >= lo) & (out <= hi))
+    p_in = stats.norm.cdf(4.0, scale=5.0) - stats.norm.cdf(-2.0, scale=5.0)
+    assert frac == pytest.approx(1.0 - p_in, abs=0.01)
+    # the truncated normal's moments, within Monte Carlo error
+    tn = stats.truncnorm(-2.0 / 5.0, 4.0 / 5.0, scale=5.0)
+    assert out[..., 1].mean() == pytest.approx(tn.mean(), abs=0.05)
+    assert out[..., 1].std() == pytest.approx(tn.std(), rel=0.02)
+    assert out[..., 0].std() == pytest.approx(1.0, rel=0.02)
+    inside, none = truncate_to_box(draws, -np.full(2, 99.0), np.full(2, 99.0), rng)
+    assert none == 0.0 and np.array_equal(inside, draws)
+
+
+def test_a_barely_seen_direction_is_no_wider_than_the_prior():
+    """A pseudo-inverse variance of 10⁶ box widths² (a parameter pinned where it moves nothing) is capped at one
+    box width; the directions the record determines keep their covariance."""
+    widths = np.array([10.0, 4.0, 2.0])
+    rng = np.random.default_rng(5)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    # built in the box's scaled frame (φ / width), where the prior is the unit cube
+    cov = widths[:, None] * ((q * np.array([1e-3, 2e-2, 1e6])) @ q.T) * widths[None, :]
+    out = within_prior(cov, widths)
+    scaled = out / widths[:, None] / widths[None, :]
+    assert np.linalg.eigvalsh(scaled).max() == pytest.approx(1.0)
+    for u in q[:, :2].T:  # the two determined directions are untouched
+        assert u @ scaled @ u == pytest.approx(u @ (q * np.array([1e-3, 2e-2, 1e6])) @ q.T @ u, rel=1e-6)
+    small = np.diag([0.1, 0.2, 0.01])
+    assert within_prior(small, widths) is small
 
 
 def test_loewner_max_is_the_larger_in_every_direction():
