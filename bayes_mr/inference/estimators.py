@@ -108,14 +108,24 @@ class Emcee:
             raise ValueError(f"evidence must be 'ti', 'laplace' or 'tmcmc', got {self.evidence!r}")
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
-        """Least squares, then the chain from its optimum, then the evidence routes."""
+        """Least squares (:meth:`lsq_settings`), then the chain from its optimum, then the evidence routes."""
+        return self.fit_from(likelihood, fit_lsq(likelihood, self.lsq_settings(seed)), seed=seed, progress=progress)
+
+    @staticmethod
+    def lsq_settings(seed: int) -> LSQSettings:
+        """The least-squares fit the chain starts from: the package's defaults, candidates seeded by ``seed``."""
+        return LSQSettings(seed=seed)
+
+    def fit_from(self, likelihood: OutputError, res: LSQResult, *, seed: int = 0,
+                 progress: bool = True) -> Posterior:
+        """The chain and its evidence routes from a least-squares fit ``res`` of ``likelihood`` already made
+        (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.comparison.lsq_mcmc_job`)."""
         from .evidence import evidence_routes, laplace_evidence, tmcmc_evidence
         from .budget import check_budget
         from .mcmc import MCMCSettings, fit_mcmc, start_from_lsq
         from .mcmc_posterior import mcmc_posterior
         from .tmcmc import TMCMCSettings, run_tmcmc
 
-        res = fit_lsq(likelihood, LSQSettings(seed=seed))
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
         if settings.max_seconds is not None:  # a chain that cannot converge in its budget is not started
             check_budget(likelihood, start_from_lsq(likelihood, res)[0], settings.walkers(likelihood.ndim),
