@@ -126,13 +126,18 @@ class Budget:
 #: least-squares optima a 24-walker likelihood evaluation costs the same at 250 Hz and 1 kHz (measured:
 #: dahl 62 and 65 ms — 19.5 and 4.5 sub-steps per sample —, lugre 13 and 14, bouc-wen 757 and 663,
 #: normalized-bouc-wen 557 and 491, spencer 149 and 163 ms), and the job took 16.8 min at 1 kHz against
-#: 17.8 at 250 Hz with the same budget (issue 16). Each form of ≤ 5 free parameters gets an emcee
-#: posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s
-#: (``max_seconds``), unless one step at its least-squares optimum projects the pilot and a minimal
-#: chain past those 150 s (:mod:`bayes_mr.inference.budget`; the headline names it and gives the
-#: numbers). With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
+#: 17.8 at 250 Hz with the same budget (issue 16). Every form is offered an emcee posterior that runs
+#: until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s (``max_seconds``), unless one step
+#: at its least-squares optimum projects the pilot and a minimal chain past those 150 s
+#: (:mod:`bayes_mr.inference.budget`; the headline names it and gives the numbers). Measured on this
+#: record (2 cores): spencer 0.38 s per step of its 56 walkers (~192 s projected), normalized-bouc-wen
+#: 0.79 s of 28 (~393 s), bouc-wen 0.58 s of 24 (~288 s) — none started; until this round a count of
+#: free parameters (> 5) left the first two out without a measurement. With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
 #: dahl converged at 450 steps (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and
-#: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
+#: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
+#: stiffness k sits on its lower bound on this record, and least squares' covariance gave it an SD of
+#: many box widths until it was capped at one (calibrate.within_prior); the walkers start from that
+#: spread, and with it dahl converged at 700 steps (21 s) and lugre at 650 (15 s), the job 12.6 min. Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
 #: record (a linear loading branch and a very stiff unloading one), where every evaluation needs ~26
 #: sub-steps per 1-kHz sample and a step ~0.7 s: run to its 150 s it stopped ~100 steps after its
 #: pilot, NOT converged, so the projection now leaves it out and says why. Selection is by the Laplace evidence
