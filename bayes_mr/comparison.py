@@ -27,22 +27,19 @@ the MCMC posterior (:mod:`bayes_mr.inference.crosscheck`).
 from __future__ import annotations
 
 import math
-import time as _time
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import xarray as xr
 
 from . import results
 from .executor import Outcome, run_jobs, share
-from .identify import Identify
+from .inference.estimators import engine
+from .fit_jobs import unit_job, unit_results
+from .fit_jobs import units as fit_units
 from .inference.budget import over_budget
-from .inference.estimators import Emcee, LeastSquares, engine
 from .inference.evidence_scale import LaplaceTerms, at_common_scale
-from .inference.lsq import fit_lsq
-from .identify import validate as validate_fit
 from .models import get_model
 from .progress import say as progress_say
 from .simulate import Inputs
@@ -110,91 +107,6 @@ def crosscheck(ukf_idata, mcmc_idata) -> dict[str, dict[str, float]]:
                      "z": (float(u.params[name]) - float(mean_m)) / scale if scale > 0 else math.nan,
                      "sd_ratio": sd_u / sd_m if sd_m > 0 else math.nan}
     return out
-
-
-#: What a fit may raise that makes it a row with ``error`` rather than the end of the comparison.
-FIT_ERRORS = (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError)
-
-
-def _failed(model: str, engine_name: str, exc: Exception, t0: float) -> tuple[dict, None]:
-    return {"model": get_model(model).name, "engine": engine_name, "error": f"{type(exc).__name__}: {exc}",
-            "wall_s": _time.perf_counter() - t0}, None
-
-
-def _row(idata, validate: xr.Dataset | None) -> tuple[dict, object]:
-    row = results.summary_of(idata).to_dict()
-    if validate is not None:
-        row["validation"] = validation_scores(idata, validate)
-    return row, idata
-
-
-def fit_job(model: str, estimator, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
-            progress: bool, noise: str = "iid") -> tuple[dict, object]:
-    """(row, InferenceData) of one model × engine; a failed fit is a row with ``error`` and no result.
-
-    Module level with picklable arguments and result, so that any executor
-    can run it (:mod:`bayes_mr.executor`); the seed is the comparison's own,
-    never the order jobs finish in.
-    """
-    t0 = _time.perf_counter()
-    try:
-        idata = Identify(model, estimator, noise=noise).fit(record, seed=seed, progress=progress)
-    except FIT_ERRORS as exc:
-        return _failed(model, estimator.name, exc, t0)
-    return _row(idata, validate)
-
-
-def shares_lsq(lsq, mcmc, seed: int) -> bool:
-    """Whether an ``lsq`` row's fit is the one ``mcmc``'s chain would start from (:func:`lsq_mcmc_job`)."""
-    return (isinstance(lsq, LeastSquares) and isinstance(mcmc, Emcee)
-            and lsq.settings == mcmc.lsq_settings(seed))
-
-
-def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
-                 progress: bool, noise: str = "iid") -> list[tuple[dict, object]]:
-    """The ``lsq`` and ``mcmc`` rows of one model from one least-squares fit: [(row, InferenceData)] × 2.
-
-    The chain starts from least squares' optimum (:meth:`~bayes_mr.inference.estimators.Emcee.fit_from`);
-    when the ``lsq`` row's settings are those the chain would use (:func:`shares_lsq`) the fit is made once,
-    not once per row — the same numbers as :func:`fit_job` twice. Each row's ``wall_s`` counts the shared fit,
-    as it did when each made its own. A failure is a row with ``error``, as in :func:`fit_job`.
-    """
-    t0 = _time.perf_counter()
-    ident = Identify(model, lsq, noise=noise)
-    try:
-        lik = ident.likelihood(record)
-        res = fit_lsq(lik, lsq.settings)
-    except FIT_ERRORS as exc:
-        return [_failed(model, lsq.name, exc, t0), _failed(model, mcmc.name, exc, t0)]
-    t_lsq = _time.perf_counter() - t0
-    out = []
-    for est, fit in ((lsq, lambda: lsq.posterior(lik, res, seed=seed)),
-                     (mcmc, lambda: mcmc.fit_from(lik, res, seed=seed, progress=progress))):
-        t1 = _time.perf_counter()
-        try:
-            idata = results.build(lik, fit())
-        except FIT_ERRORS as exc:
-            out.append(_failed(model, est.name, exc, t1 - t_lsq))  # its wall counts the shared fit
-            continue
-        summary = results.summary_of(idata)
-        summary.wall_s = t_lsq + _time.perf_counter() - t1
-        results.set_summary(idata, summary)
-        out.append(_row(idata, validate))
-    return out
-
-
-#: What a fit's prediction of another record reports (:func:`validation_scores`).
-VALIDATION_KEYS = ("mse", "force_errors", "force_nrmse", "rmse", "masked")
-
-
-def validation_scores(idata, record: xr.Dataset) -> dict:
-    """A fit's prediction of another record (thesis method 2, :func:`bayes_mr.identify.validate`):
-    :data:`VALIDATION_KEYS`, or ``error`` when it cannot predict it (another kind of test, a divergence)."""
-    try:
-        v = validate_fit(idata, record)
-    except (RuntimeError, ValueError) as exc:
-        return {"error": str(exc)}
-    return {k: v[k] for k in VALIDATION_KEYS}
 
 
 def compare(
@@ -374,7 +286,7 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
               executor, say, progress: bool, out_dir, noise: str = "iid") -> tuple[list[dict], dict]:
     """Fit every (model, engine) of ``pairs``; rows in the order of ``pairs``, fits by pair."""
     rec, val = share(executor, record), (share(executor, validate) if validate is not None else None)
-    units = _units(pairs, estimators, seed)
+    units = fit_units(pairs, estimators, seed)
     jobs = [(m, tuple(est for _, est in ests), rec, val, seed, progress, noise) for m, ests in units]
     n_done = [0]
 
@@ -384,7 +296,7 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
     def finished(o: Outcome) -> None:  # as each job finishes: report its rows, write its fits
         m, ests = units[o.index]
-        for e, (row, idata) in zip([e for e, _ in ests], _unit_results(o, len(ests))):
+        for e, (row, idata) in zip([e for e, _ in ests], unit_results(o, len(ests))):
             n_done[0] += 1
             if idata is None:
                 why = over_budget(row["error"])
@@ -398,43 +310,16 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
     if executor is not None:
         say(f"{len(pairs)} fits on {type(executor).__name__} …")
-    outcomes = run_jobs(_unit_job, jobs, executor=executor, on_start=started, on_done=finished)
+    outcomes = run_jobs(unit_job, jobs, executor=executor, on_start=started, on_done=finished)
     done = {}
     for (m, ests), o in zip(units, outcomes):
-        for e, (row, idata) in zip([e for e, _ in ests], _unit_results(o, len(ests))):
+        for e, (row, idata) in zip([e for e, _ in ests], unit_results(o, len(ests))):
             if idata is None and "model" not in row:
                 row = {"model": m, "engine": e, "error": row["error"], "wall_s": o.wall_s}
             done[(m, e)] = (row, idata)
     rows = [done[p][0] for p in pairs]
     fits = {p: done[p][1] for p in pairs if done[p][1] is not None}
     return rows, fits
-
-
-def _units(pairs: list[tuple[str, str]], estimators: dict, seed: int) -> list[tuple[str, list[tuple[str, object]]]]:
-    """The jobs of a grid: (model, [(engine, estimator)]) — one per pair, except a model's ``lsq`` and ``mcmc``,
-    which are one job when they share the least-squares fit (:func:`shares_lsq`)."""
-    est = {e: estimators.get(e) or engine(e) for _, e in pairs}
-    units: list[tuple[str, list]] = []
-    for m, e in pairs:
-        if e == "mcmc" and (m, "lsq") in pairs and shares_lsq(est["lsq"], est["mcmc"], seed):
-            continue  # with its lsq row
-        ests = [(e, est[e])]
-        if e == "lsq" and (m, "mcmc") in pairs and shares_lsq(est["lsq"], est["mcmc"], seed):
-            ests.append(("mcmc", est["mcmc"]))
-        units.append((m, ests))
-    return units
-
-
-def _unit_job(model: str, estimators: tuple, *args):
-    """One job of :func:`_units`: :func:`fit_job` (one estimator) or :func:`lsq_mcmc_job` (lsq, mcmc)."""
-    return lsq_mcmc_job(model, *estimators, *args) if len(estimators) == 2 else fit_job(model, estimators[0], *args)
-
-
-def _unit_results(o: Outcome, n: int) -> list[tuple[dict, object]]:
-    """The (row, InferenceData) of each estimator of a finished job (a job that raised: an error row each)."""
-    if not o.ok:
-        return [({"error": o.error}, None)] * n
-    return o.value if n > 1 else [o.value]
 
 
 def table(out: dict) -> pd.DataFrame:

@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from . import results
-from .comparison import validation_scores
+from .fit_jobs import validation_scores
 from .data import load_packaged, trim_excited
 from .data.derive import decimate_record
 from .data.noise_floor import noise_floor, with_noise_floor
@@ -165,7 +165,7 @@ def predict_other(fits: dict, other: xr.Dataset) -> list[dict]:
     Returns
     -------
     list of dict
-        One row per fit: ``model``, ``engine`` and :func:`~bayes_mr.comparison.validation_scores` (``force_nrmse``,
+        One row per fit: ``model``, ``engine`` and :func:`~bayes_mr.fit_jobs.validation_scores` (``force_nrmse``,
         ``mse``, ``rmse`` [SI], …, or ``error`` when the prediction failed: a row, not a crash).
     """
     return [{"model": model, "engine": engine, **validation_scores(idata, other)}

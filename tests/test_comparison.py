@@ -196,7 +196,7 @@ def test_selection_route_names_the_route_the_evidence_came_by():
 
 def test_lsq_and_mcmc_rows_share_one_least_squares_fit():
     """A model's lsq row and its chain's start are one fit (one job), with the numbers of two separate jobs."""
-    from bayes_mr.comparison import _units, fit_job, lsq_mcmc_job, shares_lsq
+    from bayes_mr.fit_jobs import fit_job, lsq_mcmc_job, shares_lsq, units
     from bayes_mr.inference.estimators import LeastSquares
     from bayes_mr.inference.lsq import LSQSettings
 
@@ -204,8 +204,8 @@ def test_lsq_and_mcmc_rows_share_one_least_squares_fit():
     lsq, mcmc = LeastSquares(), Emcee(settings=SHORT, evidence="laplace")
     assert shares_lsq(lsq, mcmc, 0) and not shares_lsq(lsq, mcmc, 1)
     assert not shares_lsq(LeastSquares(settings=LSQSettings(n_starts=2)), mcmc, 0)
-    units = _units([("dahl", "lsq"), ("dahl", "mcmc"), ("dahl", "ukf")], {"mcmc": mcmc}, 0)
-    assert [[e for e, _ in ests] for _, ests in units] == [["lsq", "mcmc"], ["ukf"]]
+    grid = units([("dahl", "lsq"), ("dahl", "mcmc"), ("dahl", "ukf")], {"mcmc": mcmc}, 0)
+    assert [[e for e, _ in ests] for _, ests in grid] == [["lsq", "mcmc"], ["ukf"]]
     shared = lsq_mcmc_job("dahl", lsq, mcmc, rec, None, 0, False)
     alone = [fit_job("dahl", e, rec, None, 0, False) for e in (lsq, mcmc)]
     for (a, _), (b, _) in zip(shared, alone):

@@ -119,7 +119,7 @@ class Emcee:
     def fit_from(self, likelihood: OutputError, res: LSQResult, *, seed: int = 0,
                  progress: bool = True) -> Posterior:
         """The chain and its evidence routes from a least-squares fit ``res`` of ``likelihood`` already made
-        (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.comparison.lsq_mcmc_job`)."""
+        (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.fit_jobs.lsq_mcmc_job`)."""
         from .evidence import evidence_routes, laplace_evidence, tmcmc_evidence
         from .budget import check_budget
         from .mcmc import MCMCSettings, fit_mcmc, start_from_lsq

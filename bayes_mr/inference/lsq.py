@@ -418,16 +418,14 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         loglik, log_prior, *evidence_scale.volume_terms(JtJ, widths),
         n_coef=int(sum(lik.residual.orders)) if ar else 0,
         sigma_counts=np.asarray(n_terms, float) if sampled else None, trace_hc=evidence_scale.trace_hc(JtJ, cov))
-    # reported and drawn from: no direction wider than the prior (the evidence's terms above keep the pseudo-inverse)
-    cov, cov_iid = (calibrate.within_prior(c, widths) for c in (cov, cov_iid))
+    cov, cov_iid = (calibrate.within_prior(c, widths) for c in (cov, cov_iid))  # reported: no wider than the box
     log_z = terms.log_evidence(1.0)
     coords = lik.par.coords
-    theta = coords.to_theta(phi)
     sd_phi = np.sqrt(np.clip(np.diag(cov), 0, None))
     sd_theta = coords.dtheta_dphi(phi) * sd_phi
     return LSQResult(
         phi=phi,
-        theta=dict(zip(coords.names, theta)),
+        theta=dict(zip(coords.names, coords.to_theta(phi))),
         cov_phi=cov,
         cov_phi_iid=cov_iid,
         sd_theta=dict(zip(coords.names, sd_theta)),

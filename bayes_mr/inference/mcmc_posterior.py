@@ -47,18 +47,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     kept = result.chain[result.burn:: result.thin]  # (n_draw, W, d)
     x = np.moveaxis(kept, 1, 0)  # (W, n_draw, d)
     if lsq is not None:
-        # the chain samples the likelihood's own curvature; give it least squares' calibrated
-        # covariance (input noise, autocorrelation), keeping its shape (calibrate.adjust_draws). The map starts from the chain's own
-        # covariance, not (JᵀJ)⁻¹: where the sampled posterior is wider than its Gauss–Newton curvature
-        # (a curved ridge) that curvature's inverse would amplify the tail, and the chain is never narrowed
-        x = x.copy()
-        cov_chain = np.atleast_2d(np.cov(x[..., :p].reshape(-1, p), rowvar=False))
-        mapped = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
-        # ... times the prior: the map can carry draws along a barely constrained direction out of the box
-        rng = np.random.default_rng(int(result.seed_entropy) if str(result.seed_entropy).isdigit() else 0)
-        mapped, outside = truncate_to_box(mapped, lik.phi_lo, lik.phi_hi, rng)
-        if outside < 1.0:  # else the map left the box entirely: keep the chain's own draws, and say so
-            x[..., :p] = mapped
+        x, outside = _calibrated(lik, x, lsq, result.seed_entropy)
     # the point the engine stands behind: the highest posterior density visited after burn-in
     post_lp = result.log_prob[result.burn:]
     i, w = np.unravel_index(int(np.argmax(post_lp)), post_lp.shape)
@@ -96,6 +85,28 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
                                 burn=int(result.burn), thin=int(result.thin)),
         groups=_groups(result, names, routes, chosen), attrs={"seed_entropy": result.seed_entropy}, wall_s=wall,
     )
+
+
+def _calibrated(lik, x: np.ndarray, lsq, seed_entropy: str) -> tuple[np.ndarray, float]:
+    """Draws x (W, n, d) with φ mapped to least squares' calibrated covariance inside the prior's box, and the
+    fraction the map carried outside (:func:`mcmc_posterior`).
+
+    The chain samples the likelihood's own curvature; the map gives it least squares' calibrated covariance
+    (input noise, autocorrelation) keeping its shape (calibrate.adjust_draws). It starts from the chain's own
+    covariance, not (JᵀJ)⁻¹: where the sampled posterior is wider than its Gauss–Newton curvature (a curved
+    ridge) that curvature's inverse would amplify the tail, and the chain is never narrowed. Times the prior:
+    draws carried along a barely constrained direction out of the box are the truncated posterior's
+    (calibrate.truncate_to_box); when every draw left it, the chain's own draws are kept.
+    """
+    p = lik.n_params
+    cov_chain = np.atleast_2d(np.cov(x[..., :p].reshape(-1, p), rowvar=False))
+    mapped = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
+    rng = np.random.default_rng(int(seed_entropy) if str(seed_entropy).isdigit() else 0)
+    mapped, outside = truncate_to_box(mapped, lik.phi_lo, lik.phi_hi, rng)
+    x = x.copy()
+    if outside < 1.0:
+        x[..., :p] = mapped
+    return x, outside
 
 
 def _routes(evidence) -> tuple[dict, object]:
