@@ -180,6 +180,17 @@ class MCMCSettings:
 SHRINK = 0.8
 
 
+def reflect_into(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Points x (B, d) mirrored at the box's faces until inside [lower, upper] (coordinates with an infinite
+    or empty side are left alone)."""
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    w = hi - lo
+    ok = np.isfinite(w) & (w > 0)
+    y = np.mod(x - lo, 2 * np.where(ok, w, 1.0))
+    inside = lo + np.where(y > w, 2 * w - y, y)
+    return np.where(ok, inside, x)
+
+
 def initial_walkers(
     log_prob: LogDensity,
     center: np.ndarray,
@@ -188,12 +199,17 @@ def initial_walkers(
     rng: np.random.Generator,
     *,
     max_rounds: int = 50,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Walkers drawn from N(center, cov), redrawn until the log-density is finite.
 
-    A walker whose draw has no finite log-density is drawn again from a cloud
-    narrowed by :data:`SHRINK` per round, so a centre at the edge of the
-    prior box (an optimum on a bound) still yields a full ensemble.
+    With ``bounds`` (the prior's box) a draw beyond a bound is mirrored back
+    into the box: a centre on a bound (an optimum pinned there, common in
+    several coordinates at once — spencer on the packaged record) would
+    otherwise lose half its draws per such coordinate, 2⁻ᵏ for k of them, and
+    the ladder below narrows the cloud only by :data:`SHRINK` per round. A walker
+    whose draw still has no finite log-density (the model fails there) is
+    drawn again from a cloud narrowed by :data:`SHRINK` per round.
 
     Returns
     -------
@@ -216,6 +232,8 @@ def initial_walkers(
     for r in range(max_rounds):
         # a cloud that overhangs the prior box (an optimum at its edge) is drawn again, narrower
         x = center + SHRINK**r * rng.standard_normal((todo.size, d)) @ L.T
+        if bounds is not None:
+            x = reflect_into(x, *bounds)
         val = np.asarray(log_prob(x), float)
         ok = np.isfinite(val)
         coords[todo[ok]] = x[ok]
@@ -262,7 +280,8 @@ def sample(
     proposal : (mean (d,), cov (d, d)[, edges]), optional
         The independence move's fixed proposal (:class:`~.moves.Independence`; default: fitted to a pilot).
     bounds : (ndarray (d,), ndarray (d,)), optional
-        The support's box, for the pilot's fit (:func:`~.moves.fit_proposal`).
+        The support's box: initial walkers are drawn inside it (:func:`initial_walkers`), and the pilot's
+        proposal is fitted with it (:func:`~.moves.fit_proposal`).
 
     Returns
     -------
@@ -286,7 +305,7 @@ def sample(
     if resuming:
         state = sampler.backend.get_last_sample()  # carries the stored random state
     else:
-        coords, lp0 = _start(log_prob, x0_center, x0_cov, n_walkers, init_rng, initial)
+        coords, lp0 = _start(log_prob, x0_center, x0_cov, n_walkers, init_rng, initial, bounds)
         state = emcee.State(coords, log_prob=lp0, random_state=move_state)
     diag, history = run_until_converged(sampler, state, settings, resuming)
     tau = diag["tau"]
@@ -332,7 +351,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
                              max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
                              seed=np.random.SeedSequence(seq.entropy, spawn_key=seq.spawn_key + (PILOT_KEY,)))
     pilot = sample(log_prob, x0_center, x0_cov, pilot_settings, names=names, initial=initial,
-                   group=group + "_pilot")
+                   group=group + "_pilot", bounds=bounds)
     x = pilot.chain[pilot.n_steps // 2:].reshape(-1, pilot.chain.shape[-1])
     if settings.max_seconds is not None:
         settings = replace(settings, max_seconds=max(settings.max_seconds - pilot.wall_s, 0.0))
@@ -343,10 +362,11 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
 PILOT_KEY = 2**31 - 1
 
 
-def _start(log_prob, x0_center, x0_cov, n_walkers, rng, initial) -> tuple[np.ndarray, np.ndarray]:
-    """Initial walker positions and their log-densities: ``initial`` checked, or drawn around the centre."""
+def _start(log_prob, x0_center, x0_cov, n_walkers, rng, initial, bounds=None) -> tuple[np.ndarray, np.ndarray]:
+    """Initial walker positions and their log-densities: ``initial`` checked, or drawn around the centre
+    (inside ``bounds``, :func:`initial_walkers`)."""
     if initial is None:
-        return initial_walkers(log_prob, x0_center, x0_cov, n_walkers, rng)
+        return initial_walkers(log_prob, x0_center, x0_cov, n_walkers, rng, bounds=bounds)
     coords = np.asarray(initial, float).copy()
     lp0 = np.asarray(log_prob(coords), float)
     if not np.all(np.isfinite(lp0)):

@@ -10,6 +10,7 @@ from bayes_mr.inference.mcmc import (
     MCMCSettings,
     fit_mcmc,
     initial_walkers,
+    reflect_into,
     sample,
 )
 
@@ -218,6 +219,24 @@ def test_walkers_start_only_where_the_density_is_finite():
     assert np.all(coords[:, 0] > 0) and np.all(np.isfinite(lp))
     with pytest.raises(RuntimeError, match="prior box"):
         initial_walkers(half_space, np.array([-50.0, 0, 0]), np.eye(3), 16, np.random.default_rng(0))
+
+
+def test_walkers_start_inside_the_box_when_the_centre_is_on_several_bounds():
+    """An optimum pinned at a bound in many coordinates at once: redrawing alone keeps losing half the draws per
+    such coordinate; mirrored into the box, every walker starts at once, spread over its width."""
+    lo, hi = np.zeros(10), np.ones(10)
+
+    def box(X):
+        X = np.atleast_2d(X)
+        return np.where(np.all((X >= lo) & (X <= hi), axis=1), 0.0, -np.inf)
+
+    with pytest.raises(RuntimeError, match="prior box"):
+        initial_walkers(box, lo, 0.25 * np.eye(10), 40, np.random.default_rng(0))
+    coords, lp = initial_walkers(box, lo, 0.25 * np.eye(10), 40, np.random.default_rng(0), bounds=(lo, hi))
+    assert np.all(np.isfinite(lp)) and np.all((coords >= lo) & (coords <= hi))
+    assert coords.std(axis=0).min() > 0.1  # a half-normal of SD 0.5, folded at 1: not collapsed onto the corner
+    x = np.array([[-0.3, 1.2, 2.5, 0.4]])
+    assert np.allclose(reflect_into(x, np.zeros(4), np.ones(4)), [[0.3, 0.8, 0.5, 0.4]])
 
 
 def test_walker_count_rules():
