@@ -137,7 +137,8 @@ class Budget:
 #: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
 #: stiffness k sits on its lower bound on this record, and least squares' covariance gave it an SD of
 #: many box widths until it was capped at one (calibrate.within_prior); the walkers start from that
-#: spread, and with it dahl converged at 700 steps (21 s) and lugre at 650 (15 s), the job 12.6 min. Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
+#: spread (mirrored into the box, not redrawn), and with it dahl converged at 550 steps (18 s) and lugre
+#: at 600 (14 s), the job 12.6 min. Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
 #: record (a linear loading branch and a very stiff unloading one), where every evaluation needs ~26
 #: sub-steps per 1-kHz sample and a step ~0.7 s: run to its 150 s it stopped ~100 steps after its
 #: pilot, NOT converged, so the projection now leaves it out and says why. Selection is by the Laplace evidence
