@@ -296,7 +296,7 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
     def finished(o: Outcome) -> None:  # as each job finishes: report its rows, write its fits
         m, ests = units[o.index]
-        for e, (row, idata) in zip([e for e, _ in ests], unit_results(o, len(ests))):
+        for e, row, idata in unit_results(o, m, [e for e, _ in ests]):
             n_done[0] += 1
             if idata is None:
                 why = over_budget(row["error"])
@@ -311,12 +311,8 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
     if executor is not None:
         say(f"{len(pairs)} fits on {type(executor).__name__} …")
     outcomes = run_jobs(unit_job, jobs, executor=executor, on_start=started, on_done=finished)
-    done = {}
-    for (m, ests), o in zip(units, outcomes):
-        for e, (row, idata) in zip([e for e, _ in ests], unit_results(o, len(ests))):
-            if idata is None and "model" not in row:
-                row = {"model": m, "engine": e, "error": row["error"], "wall_s": o.wall_s}
-            done[(m, e)] = (row, idata)
+    done = {(m, e): (row, idata) for (m, ests), o in zip(units, outcomes)
+            for e, row, idata in unit_results(o, m, [e for e, _ in ests])}
     rows = [done[p][0] for p in pairs]
     fits = {p: done[p][1] for p in pairs if done[p][1] is not None}
     return rows, fits

@@ -25,9 +25,13 @@ from .models import get_model
 FIT_ERRORS = (RuntimeError, ValueError, FloatingPointError, np.linalg.LinAlgError)
 
 
-def _failed(model: str, engine_name: str, exc: Exception, t0: float) -> tuple[dict, None]:
-    return {"model": get_model(model).name, "engine": engine_name, "error": f"{type(exc).__name__}: {exc}",
-            "wall_s": _time.perf_counter() - t0}, None
+def _failed(model: str, engine_name: str, error: str, wall_s: float) -> tuple[dict, None]:
+    """The row of a fit that failed (``error``: ``"ExceptionType: message"``), and no result."""
+    return {"model": get_model(model).name, "engine": engine_name, "error": error, "wall_s": wall_s}, None
+
+
+def _why(exc: Exception) -> str:
+    return f"{type(exc).__name__}: {exc}"
 
 
 def _row(idata, validate: xr.Dataset | None) -> tuple[dict, object]:
@@ -49,7 +53,7 @@ def fit_job(model: str, estimator, record: xr.Dataset, validate: xr.Dataset | No
     try:
         idata = Identify(model, estimator, noise=noise).fit(record, seed=seed, progress=progress)
     except FIT_ERRORS as exc:
-        return _failed(model, estimator.name, exc, t0)
+        return _failed(model, estimator.name, _why(exc), _time.perf_counter() - t0)
     return _row(idata, validate)
 
 
@@ -74,7 +78,8 @@ def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset
         lik = ident.likelihood(record)
         res = fit_lsq(lik, lsq.settings)
     except FIT_ERRORS as exc:
-        return [_failed(model, lsq.name, exc, t0), _failed(model, mcmc.name, exc, t0)]
+        wall = _time.perf_counter() - t0
+        return [_failed(model, lsq.name, _why(exc), wall), _failed(model, mcmc.name, _why(exc), wall)]
     t_lsq = _time.perf_counter() - t0
     out = []
     for est, fit in ((lsq, lambda: lsq.posterior(lik, res, seed=seed)),
@@ -83,11 +88,9 @@ def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset
         try:
             idata = results.build(lik, fit())
         except FIT_ERRORS as exc:
-            out.append(_failed(model, est.name, exc, t1 - t_lsq))  # its wall counts the shared fit
+            out.append(_failed(model, est.name, _why(exc), t_lsq + _time.perf_counter() - t1))
             continue
-        summary = results.summary_of(idata)
-        summary.wall_s = t_lsq + _time.perf_counter() - t1
-        results.set_summary(idata, summary)
+        results.set_wall(idata, t_lsq + _time.perf_counter() - t1)  # each row counts the shared fit
         out.append(_row(idata, validate))
     return out
 
@@ -110,14 +113,13 @@ def units(pairs: list[tuple[str, str]], estimators: dict, seed: int) -> list[tup
     """The jobs of a grid: (model, [(engine, estimator)]) — one per pair, except a model's ``lsq`` and ``mcmc``,
     which are one job when they share the least-squares fit (:func:`shares_lsq`)."""
     est = {e: estimators.get(e) or engine(e) for _, e in pairs}
+    shared = ({m for m, e in pairs if e == "lsq" and (m, "mcmc") in pairs}
+              if "lsq" in est and "mcmc" in est and shares_lsq(est["lsq"], est["mcmc"], seed) else set())
     units: list[tuple[str, list]] = []
     for m, e in pairs:
-        if e == "mcmc" and (m, "lsq") in pairs and shares_lsq(est["lsq"], est["mcmc"], seed):
+        if e == "mcmc" and m in shared:
             continue  # with its lsq row
-        ests = [(e, est[e])]
-        if e == "lsq" and (m, "mcmc") in pairs and shares_lsq(est["lsq"], est["mcmc"], seed):
-            ests.append(("mcmc", est["mcmc"]))
-        units.append((m, ests))
+        units.append((m, [(e, est[e])] + ([("mcmc", est["mcmc"])] if e == "lsq" and m in shared else [])))
     return units
 
 
@@ -126,8 +128,8 @@ def unit_job(model: str, estimators: tuple, *args):
     return lsq_mcmc_job(model, *estimators, *args) if len(estimators) == 2 else fit_job(model, estimators[0], *args)
 
 
-def unit_results(o: Outcome, n: int) -> list[tuple[dict, object]]:
-    """The (row, InferenceData) of each estimator of a finished job (a job that raised: an error row each)."""
+def unit_results(o: Outcome, model: str, engines: list[str]) -> list[tuple[str, dict, object]]:
+    """(engine, row, InferenceData) of each estimator of a finished job (a job that raised: an error row each)."""
     if not o.ok:
-        return [({"error": o.error}, None)] * n
-    return o.value if n > 1 else [o.value]
+        return [(e, *_failed(model, e, o.error, o.wall_s)) for e in engines]
+    return [(e, *rv) for e, rv in zip(engines, o.value if len(engines) > 1 else [o.value])]

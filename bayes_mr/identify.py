@@ -95,9 +95,7 @@ class Identify:
         t0 = _time.perf_counter()
         lik = self.likelihood(record)
         idata = results.build(lik, self.estimator.fit(lik, seed=seed, progress=progress))
-        summary = results.summary_of(idata)
-        summary.wall_s = _time.perf_counter() - t0
-        results.set_summary(idata, summary)
+        results.set_wall(idata, _time.perf_counter() - t0)
         return idata
 
 

@@ -439,3 +439,10 @@ def point_of(idata: az.InferenceData) -> dict[str, float]:
 def set_summary(idata: az.InferenceData, summary: FitSummary) -> None:
     """Replace the summary stored in a result (e.g. after adding wall time)."""
     idata.posterior.attrs["summary"] = json.dumps(summary.to_dict())
+
+
+def set_wall(idata: az.InferenceData, wall_s: float) -> None:
+    """Set the summary's ``wall_s`` [s] (the whole fit's, measured by its caller)."""
+    summary = summary_of(idata)
+    summary.wall_s = wall_s
+    set_summary(idata, summary)

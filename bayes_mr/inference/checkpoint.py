@@ -43,6 +43,12 @@ def run_seeds(seed) -> tuple[np.random.Generator, dict, str]:
     return np.random.default_rng(init_seq), rs.get_state(), entropy
 
 
+def seed_of(entropy: str) -> np.random.SeedSequence:
+    """The SeedSequence a :func:`run_seeds` entropy string names (``"ENTROPY"`` or ``"ENTROPY/K1-K2…"``)."""
+    ent, _, key = str(entropy).partition("/")
+    return np.random.SeedSequence(int(ent), spawn_key=tuple(int(k) for k in key.split("-") if k))
+
+
 def open_backend(settings, group: str, shape: tuple[int, int], entropy: str) -> tuple[object | None, bool]:
     """The run's HDF5 backend, and whether it resumes a stored chain.
 

@@ -7,6 +7,7 @@ import xarray as xr
 
 from .base import Posterior, even_indices
 from .calibrate import adjust_draws, describe, loewner_max, truncate_to_box
+from .checkpoint import seed_of
 from .evidence import Evidence, select_route
 from .evidence_scale import calibration_info
 from .mcmc import MCMCResult
@@ -101,7 +102,7 @@ def _calibrated(lik, x: np.ndarray, lsq, seed_entropy: str) -> tuple[np.ndarray,
     p = lik.n_params
     cov_chain = np.atleast_2d(np.cov(x[..., :p].reshape(-1, p), rowvar=False))
     mapped = adjust_draws(x[..., :p], lsq.phi, cov_chain, loewner_max(cov_chain, lsq.cov_phi))
-    rng = np.random.default_rng(int(seed_entropy) if str(seed_entropy).isdigit() else 0)
+    rng = np.random.default_rng(seed_of(seed_entropy))  # the chain's own seed
     mapped, outside = truncate_to_box(mapped, lik.phi_lo, lik.phi_hi, rng)
     x = x.copy()
     if outside < 1.0:
