@@ -1,13 +1,15 @@
-"""Bench figures of the compiled kernels: generic vs specialised per model, and their compile time.
+"""Bench figures of the compiled kernels: generic, inlined and specialised per model, and their compile time.
 
 Kept apart from :mod:`bayes_mr.bench` (which calls :func:`kernel_bench`) so
 the kernel figures live next to nothing else:
 
-* ``simulate_ns_per_step`` — ``{form: {"generic": ns, "specialised": ns}}``:
+* ``simulate_ns_per_step`` — ``{form: {"generic": ns, "inlined": ns, "specialised": ns}}``:
   one parameter set, one thread, a structure test on the first 10 s of
-  thesis signal I (4096 Hz), wall time per sample, best of a few runs.
+  thesis signal I (4096 Hz), wall time per sample, best of a few runs. The
+  inlined kernel is what ``auto`` runs for a model with no specialised
+  kernel compiled yet (:func:`bayes_mr._specialise.inlined`).
 * ``kernel_speedup`` — generic over specialised for the dahl structure step,
-  same run.
+  same run; ``inlined_speedup`` — generic over inlined, same step.
 * ``compile_s`` — ``{"cold": s, "warm": s}``: a fresh process simulating dahl
   with an empty kernel cache (compiles), then a second one with that cache
   (loads the machine code from disk); import time excluded.
@@ -24,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._specialise import CACHE_ENV, specialised
+from ._specialise import CACHE_ENV, inlined, specialised
 from .models import get_model
 from .models.drivers import run_batch
 from .signals import thesis_signal
@@ -61,7 +63,7 @@ def _best_ns(fn, args, n_steps: int, repeats: int) -> float:
 
 
 def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) -> dict:
-    """ns per sample of the generic and the specialised simulator, per form (structure test, one thread)."""
+    """ns per sample of the generic, inlined and specialised simulator, per form (structure test, one thread)."""
     import numba
 
     sig = thesis_signal("I")
@@ -80,6 +82,7 @@ def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) 
             buf = (np.empty((1, n, 4)), np.zeros((1, n - 1), np.int64), np.empty(1, np.int64))
             args = (lay, cst, P, dt, rows, buf[0], buf[1], False, buf[2])
             out[form] = {"generic": _best_ns(run_batch, args, n - 1, repeats),
+                         "inlined": _best_ns(inlined(run_batch), args, n - 1, repeats),
                          "specialised": _best_ns(specialised(run_batch, lay), args, n - 1, repeats)}
     finally:
         numba.set_num_threads(threads)
@@ -100,8 +103,9 @@ def compile_seconds() -> dict:
 
 
 def kernel_bench() -> dict:
-    """``simulate_ns_per_step``, ``kernel_speedup`` (dahl) and ``compile_s`` (see the module docstring)."""
+    """``simulate_ns_per_step``, ``kernel_speedup``, ``inlined_speedup`` (dahl) and ``compile_s`` (module docstring)."""
     ns = simulate_ns_per_step()
     return {"simulate_ns_per_step": ns,
             "kernel_speedup": ns["dahl"]["generic"] / ns["dahl"]["specialised"],
+            "inlined_speedup": ns["dahl"]["generic"] / ns["dahl"]["inlined"],
             "compile_s": compile_seconds()}

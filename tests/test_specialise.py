@@ -47,15 +47,16 @@ def _inputs(kind: str) -> Inputs:
     return _forced_inputs()
 
 
-def _both(name: str, kind: str, inline=S.INLINE, driver=run_batch):
-    """Outputs and schedules of the generic and of the specialised kernel on the same inputs."""
+def _both(name: str, kind: str, inline=S.INLINE, driver=run_batch, any_layout: bool = False):
+    """Outputs and schedules of the generic and of the specialised (``any_layout``: the inlined) kernel on the
+    same inputs."""
     m = get_model(name)
     inp = _inputs(kind)
     lay, cst = m.layout(kind), m.constants(inp.mass)
     P = np.atleast_2d(m.theta(kind, {}))
     n_out = 4 if kind != "device" else 2
     res = []
-    for fn in (driver, S.specialised(driver, lay, inline)):
+    for fn in (driver, S.specialised(driver, None if any_layout else lay, inline)):
         out = np.empty((1, inp.n, n_out))
         sched = np.zeros((1, inp.n - 1), np.int64)
         if driver is run_batch:
@@ -85,6 +86,15 @@ def test_specialised_matches_generic_and_caches_outside_the_repo(cache):
     assert not list((cache / "kernels").glob("*.tmp"))
 
 
+def test_inlined_kernel_matches_generic_for_every_layout(cache):
+    """The inlined kernel (physics inlined, layout read at run time) gives the generic kernel's numbers, and the
+    one compiled kernel serves two models."""
+    _assert_same(_both("dahl", "structure", driver=run_one, any_layout=True))
+    _assert_same(_both("lugre+force_offset+voltage_dependence", "device", driver=run_one, any_layout=True))
+    generated = list((cache / "kernels").glob("k_run_one_any_*.py"))
+    assert len(generated) == 1 and "LAY" not in generated[0].read_text()
+
+
 def test_kernel_switch(monkeypatch, cache):
     lay = get_model("dahl").layout("structure")
     monkeypatch.setenv(S.KERNELS_ENV, "generic")
@@ -99,15 +109,19 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
     from bayes_mr.models.kernel import mass
 
     monkeypatch.setenv(S.KERNELS_ENV, "auto")
+    monkeypatch.setattr(S, "_work", {})
     started = []
-    monkeypatch.setattr(S, "_start_background", lambda d, l, t: started.append(t))
+    monkeypatch.setattr(S, "_start_background", lambda d, l, t: started.append((l, t)))
     args = _mass_args("lugre+force_offset", "device")
-    for work in (1e6, S.AUTO_WORK / 2):
-        assert S.kernel(mass, args[0], work=work)(*args) == mass(*args)
+    assert S.kernel(mass, args[0], work=S.INLINED_WORK / 2)(*args) == mass(*args)
     assert started == []
-    k = S.kernel(mass, args[0], work=S.AUTO_WORK / 2)
+    # another layout's work counts towards the inlined kernel (one for all layouts), not towards this one's
+    other = _mass_args("dahl", "device")
+    assert S.kernel(mass, other[0], work=S.INLINED_WORK / 2)(*other) == mass(*other)
+    assert len(started) == 1 and started[0][0] is None and len(started[0][1]) == 3  # the argument types
+    k = S.kernel(mass, args[0], work=S.AUTO_WORK)
     assert k(*args) == mass(*args) and k.dispatcher is mass  # the generic kernel ran this call
-    assert len(started) == 1 and len(started[0]) == 3  # the argument types the child compiles for
+    assert len(started) == 2 and started[1][0] == tuple(int(v) for v in args[0])  # then the specialised one
 
 
 def _mass_args(name: str, kind: str) -> tuple:
