@@ -204,7 +204,8 @@ def _kernel_args(problem: Problem, settings: UKFSettings):
     width = hi - lo
     phi_lo = np.where(coords.log_like, lo - margin, lo - settings.box_decades * width)
     phi_hi = np.where(coords.log_like, hi + margin, hi + settings.box_decades * width)
-    lay = model.layout(kind, problem.channels)  # the filter predicts the channels the likelihood measures
+    # the filter predicts the channels the likelihood measures; its layout carries L and ny (ukf_kernel.ukf_layout)
+    lay = K.ukf_layout(model.layout(kind, problem.channels), L, len(problem.channels))
     cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max)
     return dict(
         lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.code,

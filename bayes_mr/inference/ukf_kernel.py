@@ -25,7 +25,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, advance, channel, deriv, rate, substeps
+from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, advance, channel, deriv, rate, substeps
 from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
 
 # status codes of a run
@@ -42,20 +42,30 @@ NAMES = {
 # info slots
 I_STATUS, I_STEP, I_LOGLIK, I_JITTER, I_NSUB, I_CLIP, I_NUPD = range(7)
 INFO_SIZE = 7
+# the filter's layout: the model's (models.kernel) and, after it, the augmented state's size L and the number of
+# measured channels ny. A kernel specialised to the layout (bayes_mr._specialise) then knows every loop bound of
+# the filter step at compile time, as it knows the model's branches.
+U_L = LAYOUT_SIZE
+U_NY = LAYOUT_SIZE + 1
+UKF_LAYOUT_SIZE = LAYOUT_SIZE + 2
+
+
+def ukf_layout(lay: np.ndarray, L: int, ny: int) -> np.ndarray:
+    """The filter's layout: the model's layout ``lay`` followed by the sizes L and ny."""
+    return np.concatenate([np.asarray(lay, np.int64)[:LAYOUT_SIZE], np.array([L, ny], np.int64)])
 
 
 @hot
-def observe(lay, cst, th, t, a, s, ds, y):
-    """Measured channels predicted from state s: those the layout's L_OBS slots name, in order."""
+def observe(lay, cst, th, t, a, s, ds, y, ny):
+    """The ny measured channels predicted from state s: those the layout's L_OBS slots name, in order."""
     f_r, f_d = deriv(lay, cst, th, t, a, s, ds)
-    for q in range(y.shape[0]):
+    for q in range(ny):
         y[q] = channel(lay, cst, th, a, s, f_r, lay[L_OBS + q])
 
 
 @hot(inline="always")
-def _add_noise(P, Q):
-    """P += Q (the additive process or measurement noise of one step)."""
-    n = P.shape[0]
+def _add_noise(P, Q, n):
+    """P += Q (the additive process or measurement noise of one step; n × n)."""
     for q in range(n):
         for r in range(n):
             P[q, r] += Q[q, r]
@@ -77,13 +87,13 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     S, Pj, X, TH, d, DX = sig
     K1, work, sbuf = pbuf
     ns = lay[L_NS]
-    L = m.shape[0]
+    L = lay[U_L]
     nsig = 2 * L + 1
     jit = sigma_points(m, P, S, Pj, X, spread, L)
     if jit < 0:
         return CHOL_FAILED, 0, 0
     lam = 0.0
-    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, TH)
+    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH)
     for i in range(nsig):
         deriv(lay, cst, TH[i], t, a0, X[i, :ns], K1[i])
         if lay[L_KIND] == DEVICE:
@@ -105,8 +115,8 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
                 finite = False
     if not finite:
         return NON_FINITE, jit, n_sub
-    moments(X, X, nsig, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
-    _add_noise(P, Q)
+    moments(X, X, nsig, L, L, w0m, w0c, wi, ab, central, m, m, P, d, d, True, DX, DX)
+    _add_noise(P, Q, L)
     return OK, jit, n_sub
 
 
@@ -123,24 +133,24 @@ def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     S, Pj, X, TH, d, DX = sig
     Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY = ubuf
     ns = lay[L_NS]
-    L = m.shape[0]
-    ny = y.shape[0]
+    L = lay[U_L]
+    ny = lay[U_NY]
     nsig = 2 * L + 1
     finite = True
     jit = sigma_points(m, P, S, Pj, X, spread, L)
     if jit < 0:
         return CHOL_FAILED, 0, 0.0
-    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, TH)
+    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH)
     for i in range(nsig):
-        observe(lay, cst, TH[i], t1, a1, X[i, :ns], dsbuf, Y[i])
+        observe(lay, cst, TH[i], t1, a1, X[i, :ns], dsbuf, Y[i], ny)
         for q in range(ny):
             if not math.isfinite(Y[i, q]):
                 finite = False
     if not finite:
         return NON_FINITE, jit, 0.0
-    moments(Y, Y, nsig, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
-    moments(X, Y, nsig, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
-    _add_noise(Pyy, R)
+    moments(Y, Y, nsig, ny, ny, w0m, w0c, wi, ab, central, yhat, yhat, Pyy, dy, dy, True, DY, DY)
+    moments(X, Y, nsig, L, ny, w0m, w0c, wi, ab, central, mx, yhat, Pxy, d, dy, False, DX, DY)
+    _add_noise(Pyy, R, ny)
     if not cholesky(Pyy, Syy, ny):
         return INNOVATION_NOT_PD, jit, 0.0
     for q in range(ny):
@@ -214,7 +224,7 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
     stride, hist_m, hist_sd, states_m, store_states, info = out
     N = inputs.shape[0]
     ns = lay[L_NS]
-    L = m.shape[0]
+    L = lay[U_L]
     npf = L - ns
     loglik = 0.0
     n_jitter = 0
@@ -304,7 +314,8 @@ def ukf_run(
 
     Parameters
     ----------
-    lay, cst : model layout and constants (see models.kernel).
+    lay : the filter's layout (:func:`ukf_layout`: the model's, then L and ny).
+    cst : model constants (see models.kernel).
     tmpl : (n_full,) parameter template (fixed parameters at their values).
     free_idx, is_log, scale : free-parameter positions and coordinates.
     phi_lo, phi_hi : box kept by the mean of φ and by sigma-point evaluation.
@@ -336,8 +347,8 @@ def ukf_run(
     info : (INFO_SIZE,) float array written on exit.
     """
     ns = lay[L_NS]
-    L = m.shape[0]
-    ny = yobs.shape[1]
+    L = lay[U_L]
+    ny = lay[U_NY]
     nsig = 2 * L + 1
     nfull = tmpl.shape[0]
     S = np.zeros((L, L))
@@ -414,5 +425,5 @@ def measure(lay, cst, th, t, a, s, ny):
     """The measured channels predicted from one state vector (for references)."""
     y = np.zeros(ny)
     ds = np.zeros(lay[L_NS])
-    observe(lay, cst, th, t, a, s, ds, y)
+    observe(lay, cst, th, t, a, s, ds, y, ny)
     return y

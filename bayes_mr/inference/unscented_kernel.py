@@ -72,9 +72,8 @@ def sigma_points(m, P, S, Pj, X, spread, L):
 
 
 @hot(inline="always")
-def _about_central(A, nsig, wi, m, dm, D):
-    """Deviations D[i] = A[i] − A[0] (i ≥ 1), δ = wi Σ D[i] into dm, and the mean m = A[0] + δ."""
-    n = A.shape[1]
+def _about_central(A, nsig, n, wi, m, dm, D):
+    """Deviations D[i] = A[i] − A[0] (i ≥ 1), δ = wi Σ D[i] into dm, and the mean m = A[0] + δ (n columns)."""
     for q in range(n):
         dm[q] = 0.0
     for i in range(1, nsig):
@@ -88,9 +87,9 @@ def _about_central(A, nsig, wi, m, dm, D):
 
 
 @hot(inline="always")
-def _raw_mean(A, nsig, w0m, wi, m):
+def _raw_mean(A, nsig, n, w0m, wi, m):
     """The mean of the rows of A with the raw weights, m = w0m A[0] + wi Σ_{i≥1} A[i] (thesis, filterpy)."""
-    for q in range(A.shape[1]):
+    for q in range(n):
         acc = w0m * A[0, q]
         for i in range(1, nsig):
             acc += wi * A[i, q]
@@ -98,23 +97,23 @@ def _raw_mean(A, nsig, w0m, wi, m):
 
 
 @hot
-def moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA, DB):
-    """Unscented mean of the rows of A (and B) and their cross-covariance Pab.
+def moments(A, B, nsig, na, nb, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA, DB):
+    """Unscented mean of the first ``na`` (``nb``) columns of the rows of A (and B) and their cross-covariance Pab.
 
     ``central`` sums about the first (central) point:
     m = A₀ + δ, P = Σ_{i≥1} W_i ΔA_i ΔB_iᵀ + (β − α²) δ_A δ_Bᵀ;
     otherwise with the raw weights (thesis, filterpy). When ``same`` only the
     lower triangle is computed and mirrored, and B, mb, db, DB must be the
     same arrays as A, ma, da, DA. DA, DB are scratch (nsig, ·): the
-    deviations are formed once, not once per covariance entry.
+    deviations are formed once, not once per covariance entry. The sizes are
+    arguments, not the arrays' shapes, so that a kernel compiled for one
+    state size (:mod:`bayes_mr.inference.ukf_kernel`) knows them as constants.
     """
-    na = A.shape[1]
-    nb = B.shape[1]
     if central:
         # when ``same``, B is A and db, mb, DB alias da, ma, DA: fill them once
-        _about_central(A, nsig, wi, ma, da, DA)
+        _about_central(A, nsig, na, wi, ma, da, DA)
         if not same:
-            _about_central(B, nsig, wi, mb, db, DB)
+            _about_central(B, nsig, nb, wi, mb, db, DB)
         for q in range(na):
             top = q + 1 if same else nb
             for r in range(top):
@@ -126,9 +125,9 @@ def moments(A, B, nsig, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, same, DA
                 if same:
                     Pab[r, q] = v
     else:
-        _raw_mean(A, nsig, w0m, wi, ma)
+        _raw_mean(A, nsig, na, w0m, wi, ma)
         if not same:
-            _raw_mean(B, nsig, w0m, wi, mb)
+            _raw_mean(B, nsig, nb, w0m, wi, mb)
         for i in range(nsig):
             for q in range(na):
                 DA[i, q] = A[i, q] - ma[q]
@@ -157,7 +156,7 @@ def _coord(c, v):
 
 
 @hot
-def sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, TH):
+def sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH):
     """TH[i] ← θ of every sigma point m, m ± spread·S[:, i] (each row of X clipped to the box [phi_lo, phi_hi] and mapped to θ).
 
     A log coordinate's pair of points costs one exponential, not two:
@@ -167,14 +166,14 @@ def sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns
     clipped and evaluated directly. The product
     differs from exp(m + d) by rounding only (≤ 2 ulp): per sample that is
     ~60 of the ~120 exponentials of a dahl filter step (4 parameters, 15
-    sigma points, predicted and updated).
+    sigma points, predicted and updated). ``L`` is the augmented state's size
+    (``ns`` model states and L − ns free parameters).
     """
-    L = m.shape[0]
     nsig = 2 * L + 1
     for i in range(nsig):
         for q in range(tmpl.shape[0]):
             TH[i, q] = tmpl[q]
-    for j in range(free_idx.shape[0]):
+    for j in range(L - ns):
         q, c, k, sc = ns + j, is_log[j], free_idx[j], scale[j]
         lo, hi, mq = phi_lo[j], phi_hi[j], m[ns + j]
         centre = _coord(c, min(max(mq, lo), hi))

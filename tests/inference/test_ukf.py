@@ -218,7 +218,7 @@ def test_sigma_point_parameters_equal_each_point_mapped_on_its_own():
         spread = 2.6
         assert U.sigma_points(m, P, S, Pj, X, spread, L) == 0
         TH = np.zeros((2 * L + 1, tmpl.size))
-        U.sigma_thetas(tmpl, free_idx, is_log, scale, lo, hi, m, S, spread, ns, TH)
+        U.sigma_thetas(tmpl, free_idx, is_log, scale, lo, hi, m, S, spread, ns, L, TH)
         phi = np.clip(X[:, ns:], lo, hi)
         v = np.where(is_log == 1, np.exp(phi), np.where(is_log == 2, np.sinh(phi), phi)) / scale
         want = np.tile(tmpl, (2 * L + 1, 1))
