@@ -76,6 +76,10 @@ AUTO_WORK = 2e8
 #: one core (the simulator) once per machine and halves the generic step (dahl structure 126 -> 60 ns,
 #: normalized-bouc-wen 221 -> 159 ns, measured): a diagnose or a few least-squares fits of a long record pay.
 INLINED_WORK = 2e7
+#: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to
+#: pay for any compile or long enough for its model's specialised kernel (``AUTO_WORK``), and the filter's
+#: sigma-point arithmetic gains from inlining only with the sizes constant (:data:`INLINE`).
+INLINED_TIER = ("run_batch",)
 
 #: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics).
 #: The constant layout alone (nothing inlined) measured 1.3x on the dahl structure step; inlining these
@@ -414,7 +418,8 @@ def kernel(dispatcher, lay, work: float = 0.0):
     compiled in the calling process if need be (and mark it ready for
     ``auto``); ``auto`` (default) runs the fastest one compiled on disk for
     the call's argument types, and starts background compiles once the work
-    pays (:data:`AUTO_WORK`, :data:`INLINED_WORK`, :class:`_Auto`).
+    pays (:data:`AUTO_WORK`; :data:`INLINED_WORK` for the kernels of
+    :data:`INLINED_TIER`; :class:`_Auto`).
 
     Parameters
     ----------
@@ -438,5 +443,6 @@ def kernel(dispatcher, lay, work: float = 0.0):
     with _lock:
         for k in (key, key_any):
             _work[k] = _work.get(k, 0.0) + float(work)
-        pays, pays_inlined = _work[key] >= AUTO_WORK, _work[key_any] >= INLINED_WORK
+        pays = _work[key] >= AUTO_WORK
+        pays_inlined = _work[key_any] >= INLINED_WORK and dispatcher.py_func.__name__ in INLINED_TIER
     return _Auto(dispatcher, lay_t, pays, pays_inlined)

@@ -110,6 +110,7 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
 
     monkeypatch.setenv(S.KERNELS_ENV, "auto")
     monkeypatch.setattr(S, "_work", {})
+    monkeypatch.setattr(S, "INLINED_TIER", ("mass",))
     started = []
     monkeypatch.setattr(S, "_start_background", lambda d, l, t: started.append((l, t)))
     args = _mass_args("lugre+force_offset", "device")
