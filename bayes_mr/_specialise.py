@@ -303,11 +303,13 @@ def inlined(dispatcher, inline: tuple[str, ...] = INLINE):
 
 
 def ready_path(path: Path, argtypes: tuple) -> Path:
-    """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``."""
-    key = (path, argtypes)
+    """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``; its name hashes
+    numba's cache directory (keyed on the package's sources, :mod:`bayes_mr._jit`) so that after an edit an old
+    marker cannot make ``auto`` compile in the calling process (it did: a compare's UKF row took 173 s, not 4)."""
+    key = (path, argtypes, numba.config.CACHE_DIR)
     marker = _markers.get(key)  # memoised: every kernel call asks
     if marker is None:
-        h = hashlib.sha256(repr(argtypes).encode()).hexdigest()[:12]
+        h = hashlib.sha256((repr(argtypes) + str(numba.config.CACHE_DIR)).encode()).hexdigest()[:12]
         marker = _markers[key] = path.with_name(f"{path.stem}.{h}.ready")
     return marker
 

@@ -150,6 +150,18 @@ def test_background_compile_is_used_once_ready(monkeypatch, cache):
     assert sum(fn.stats.cache_hits.values()) == 1 and not fn.stats.cache_misses
 
 
+def test_ready_marker_follows_numbas_cache(monkeypatch, cache):
+    """A marker says the machine code is in numba's cache: another cache directory (an edited package) has
+    none, so the old marker must not count there."""
+    import numba
+
+    path = S.module_path(run_batch, get_model("dahl").layout("structure"))
+    types = ("int64",)
+    a = S.ready_path(path, types)
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(cache / "another"))
+    assert S.ready_path(path, types) != a
+
+
 def test_module_name_follows_the_physics(cache, tmp_path):
     """The generated module's name hashes the layout and the kernel's sources: another layout, another module."""
     a = S.module_path(run_batch, get_model("dahl").layout("structure"))
