@@ -105,8 +105,12 @@ def test_power_posterior_ti_matches_the_analytic_evidence_with_its_ladder_error(
     assert within(ti, log_z), (ti.log_z - log_z, ti.mc_error, ti.ladder_error)
     assert ti.ladder_error > ti.mc_error
     assert ti.total_error < 0.6
-    # the plain trapezoid alone would be off by several of its Monte Carlo errors (2.77 with seed 6 and the current sampler)
-    assert abs(ti.details["trapezoid"] - log_z) > 2.5 * ti.mc_error
+    # the plain trapezoid is biased low on this ladder (the integrand is convex in β): over twelve ladder seeds it
+    # missed by −0.20 to −0.56 (mean −0.40) against an MC error of 0.11–0.14, so its miss in units of the MC
+    # error (1.6–4.8) is no fixed bound; its sign is, and the correction must move the estimate up by more
+    # than the MC error
+    assert ti.details["trapezoid"] < log_z
+    assert ti.log_z - ti.details["trapezoid"] > ti.mc_error
 
 
 def test_select_prefers_ti_then_laplace():
