@@ -7,8 +7,11 @@ on a grid S times finer with the drive reconstructed band-limited
 sub-steps as a local stability/accuracy bound asks for (h·λ ≤ c_acc, λ the
 fastest local rate of the model, see :func:`bayes_mr.models.kernel.rate`),
 so a stiff Dahl or Spencer law stays stable at a coarse sampling rate without
-paying for sub-steps where the motion is slow. Every simulation starts from
-rest at the first sample.
+paying for sub-steps where the motion is slow; where that bound asks for
+several, an L-stable Rosenbrock step is tried first and kept where its error
+test passes (:mod:`bayes_mr.models.integrate`): on a hysteretic branch the
+stiff state sits at its attractor and one step follows it. Every simulation
+starts from rest at the first sample.
 
 Batches of parameter sets (UKF sigma points, MCMC walkers, Jacobian columns)
 run in parallel; a *schedule* (sub-steps per interval) can be replayed so
@@ -46,8 +49,10 @@ class Simulation:
     failed : ndarray of int, shape (B,)
         Sample where the state became non-finite, or -1.
     schedule : ndarray of int, shape (B, S·(N-1))
-        RK4 sub-steps used in each interval of the simulation grid (S =
-        ``Inputs.upsample``: 1 unless the input is reconstructed band-limited).
+        RK4 sub-steps each interval of the simulation grid asked for (S =
+        ``Inputs.upsample``: 1 unless the input is reconstructed band-limited),
+        negative where the interval was taken by ROS2 instead
+        (:mod:`bayes_mr.models.integrate`); replaying it replays both.
     """
 
     outputs: dict[str, np.ndarray]
@@ -69,6 +74,7 @@ def simulate(
     *,
     c_acc: float = 1.0,
     n_max: int = 400,
+    ros2: bool = True,
     schedule: np.ndarray | None = None,
 ) -> Simulation:
     """Simulate ``model`` driven by ``inputs`` for one or many parameter sets.
@@ -85,6 +91,11 @@ def simulate(
         Sub-step bound: RK4 sub-steps per sample are ceil(h·λ / c_acc).
     n_max : int
         Most sub-steps per sample.
+    ros2 : bool
+        Try the L-stable Rosenbrock step on intervals where RK4 would need
+        more than :data:`~bayes_mr.models.integrate.ROS2_ABOVE` sub-steps,
+        kept where its error test passes (:mod:`bayes_mr.models.integrate`);
+        False integrates every interval with RK4, the thesis's integrator.
     schedule : ndarray of int, shape (S·(N-1),), optional
         Replay these sub-steps for every member instead of choosing them (a
         previous :attr:`Simulation.schedule` row of the same inputs).
@@ -103,7 +114,7 @@ def simulate(
         raise ValueError(f"{model.name} ({kind} test) has {n_par} parameters, got {P.shape[1]}")
     B, N = P.shape[0], inputs.n
     lay = model.layout(kind)
-    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max)
+    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max, ros2=ros2)
     names = OUTPUT_NAMES[kind]
     out = np.empty((B, N, len(names)))
     failed = np.empty(B, dtype=np.int64)

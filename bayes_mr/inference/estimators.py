@@ -265,7 +265,8 @@ class UKF:
         return Posterior(
             engine=self.name, draws=likelihood.par.coords.to_theta(draws_phi)[None], point=point, x_draws=x,
             log_evidence=log_evidence, lp=np.full((1, self.n_draws), log_evidence),
-            simulation={"c_acc": self.settings.c_acc, "n_max": self.settings.n_max}, info=info,
+            simulation={"c_acc": self.settings.c_acc, "n_max": self.settings.n_max, "ros2": self.settings.ros2},
+            info=info,
             groups={"ukf_training": training, "ukf_validation": validation},
             attrs={"selected_run": int(sel), "method": method},
             trained=int(training.attrs["trained"]), diverged=int(training.attrs["diverged"]),

@@ -67,8 +67,8 @@ class UKFSettings:
         parameter within 1.4 SD. 0 keeps the chosen run as is (the thesis).
     refine_inflation : float
         SD factor of the refinement passes' priors.
-    c_acc, n_max : float, int
-        Sub-step control of the model integration (see ``simulate``).
+    c_acc, n_max, ros2 : float, int, bool
+        Sub-step control and integrator of the model (see ``simulate``).
     history_points : int
         Parameter histories are kept at about this many time points.
     """
@@ -81,6 +81,7 @@ class UKFSettings:
     refine_inflation: float = 10.0
     c_acc: float = 1.0
     n_max: int = 400
+    ros2: bool = True
     history_points: int = 2000
 
     @classmethod
@@ -206,7 +207,7 @@ def _kernel_args(problem: Problem, settings: UKFSettings):
     phi_hi = np.where(coords.log_like, hi + margin, hi + settings.box_decades * width)
     # the filter predicts the channels the likelihood measures; its layout carries L and ny (ukf_kernel.ukf_layout)
     lay = K.ukf_layout(model.layout(kind, problem.channels), L, len(problem.channels))
-    cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max)
+    cst = model.constants(problem.inputs.mass, c_acc=settings.c_acc, n_max=settings.n_max, ros2=settings.ros2)
     return dict(
         lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.code,
         scale=coords.scale, phi_lo=phi_lo, phi_hi=phi_hi, h=problem.inputs.dt,

@@ -25,7 +25,8 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, advance, channel, deriv, rate, substeps
+from ..models.integrate import DECIDE, advance, substeps, work_shape
+from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, channel, deriv, rate
 from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
 
 # status codes of a run
@@ -108,7 +109,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     for i in range(nsig):
         for q in range(ns):
             sbuf[q] = X[i, q]
-        advance(lay, cst, TH[i], t, h, a0, a1, sbuf, K1[i], n_sub, work)
+        advance(lay, cst, TH[i], t, h, a0, a1, sbuf, K1[i], n_sub, DECIDE, work)
         for q in range(ns):
             X[i, q] = sbuf[q]
             if not math.isfinite(sbuf[q]):
@@ -357,7 +358,7 @@ def ukf_run(
     TH = np.zeros((nsig, nfull))
     K1 = np.zeros((nsig, ns))
     Y = np.zeros((nsig, ny))
-    work = np.zeros((5, max(ns, 3)))
+    work = np.zeros(work_shape(ns))
     sbuf = np.zeros(ns)
     dsbuf = np.zeros(ns)
     d = np.zeros(L)
@@ -414,9 +415,9 @@ def propagate(lay, cst, th, t, h, a0, a1, s, n_sub):
     ns = lay[L_NS]
     out = s.copy()
     k1 = np.zeros(ns)
-    work = np.zeros((5, max(ns, 3)))
+    work = np.zeros(work_shape(ns))
     deriv(lay, cst, th, t, a0, out, k1)
-    advance(lay, cst, th, t, h, a0, a1, out, k1, n_sub, work)
+    advance(lay, cst, th, t, h, a0, a1, out, k1, n_sub, DECIDE, work)
     return out
 
 

@@ -93,7 +93,7 @@ def validate_runs(
     for start in range(0, todo.size, batch):
         members = todo[start:start + batch]
         sim = simulate(model, inputs, full_theta(training, theta[members]),
-                       c_acc=settings.c_acc, n_max=settings.n_max)
+                       c_acc=settings.c_acc, n_max=settings.n_max, ros2=settings.ros2)
         for b, r in enumerate(members):
             out.add(r, sim, b, scorer)
     ds = out.to_dataset(runs)

@@ -2,7 +2,7 @@
 
 They allocate their buffers once and call the per-sub-step functions of
 :mod:`bayes_mr.models.kernel` (:func:`~bayes_mr.models.kernel.deriv`,
-:func:`~bayes_mr.models.kernel.rate`, :func:`~bayes_mr.models.kernel.advance`)
+:func:`~bayes_mr.models.kernel.rate`, :func:`~bayes_mr.models.integrate.advance`)
 over every sample of a record; :func:`bayes_mr.simulate.simulate` is their
 Python face.
 """
@@ -15,7 +15,8 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from .kernel import DEVICE, L_KIND, L_NS, acceleration, advance, deriv, rate, substeps
+from .integrate import DECIDE, RK4, ROS2, advance, substeps, work_shape
+from .kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, rate
 
 
 @hot(inline="always")
@@ -55,13 +56,16 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
             return k
         if k == N - 1:
             break
-        if use_schedule:
-            n_sub = schedule[k]
+        if use_schedule:  # a negative count replays an interval taken by ROS2
+            n_sub = abs(schedule[k])
+            mode = ROS2 if schedule[k] < 0 else RK4
         else:
             lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
             n_sub = substeps(lay, cst, lam, h)
+            mode = DECIDE
             schedule[k] = n_sub
-        advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, work)
+        if advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work) and not use_schedule:
+            schedule[k] = -n_sub
     return -1
 
 
@@ -88,7 +92,7 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
     ns = lay[L_NS]
     s = np.zeros(ns)
     k1 = np.zeros(ns)
-    work = np.zeros((5, max(ns, 3)))
+    work = np.zeros(work_shape(ns))
     return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every)
 
 

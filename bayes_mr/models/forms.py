@@ -114,6 +114,11 @@ SPENCER = Form(
     states=("y", "z", "u"),
     frame_in_form=False,
     fixed=("A",),
+    # its force runs through a stiff two-state block (y, z: the series dashpot c0 + c1 against αz), where the
+    # Rosenbrock step's state-wise error test does not bound the force's error: against solve_ivp, RK4 7e-6
+    # (structure test, 1 kHz) and 5e-7 (device, 3 kHz) of the SD, the adaptive step 1.8e-3 and 7e-5; and on the
+    # packaged damper at its least-squares optimum the test kept ROS2 in 12 % of the intervals, a net loss
+    ros2=False,
     derived=(Ratio("x0", "m", "accumulator initial displacement F_pre/k1", "F_pre", "k1"),),
 )
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
-from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _coil_step, _fluid_friction,
+from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _fluid_friction,
                              _fluid_slope, _lag_bound, _lag_rate, _saturate, _sgn)
 from .term_kernel import TERM_LAW, term_basis
 
@@ -75,7 +75,9 @@ assert K_SMOOTH == 4, "kernel_effects' constant must follow the step-control con
 K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the step control: the divisions by
 #              the mass, by c_acc and by n_sub cost the specialised dahl structure step 66 -> 35 ns per sample
 #              (measured; the step-control divisions sat between a sample's state and its first RK4 stage)
-CONST_SIZE = 6
+K_STIFF = 6  # RK4 sub-steps per interval above which the interval is tried with ROS2 (models.integrate)
+K_RTOL = 7  # relative error a ROS2 interval may have, else it is taken by RK4
+CONST_SIZE = 8
 
 
 @hot(inline="always")
@@ -293,7 +295,7 @@ def channel(lay, cst, p, a, s, f_r, code):
 def rate(lay, cst, p, t, s, vmax):
     """Upper estimate of the fastest local rate |λ| [1/s] of the dynamics.
 
-    Used to choose RK4 sub-steps per sample (h·λ ≤ c_acc). ``vmax`` is the
+    Used to choose sub-steps per sample (h·λ ≤ c_acc, :mod:`bayes_mr.models.integrate`). ``vmax`` is the
     largest |ẋ| expected over the step [m/s]; ``t`` the time [s].
     """
     form = lay[L_FORM]
@@ -376,72 +378,3 @@ def rate(lay, cst, p, t, s, vmax):
             stiff += 3.0 * abs(p[lay[L_K3]]) * s[0] * s[0]
         lam += damp * im + math.sqrt(abs(stiff) * im) + math.sqrt(abs(coupling) * im)
     return lam
-
-
-@hot
-def substeps(lay, cst, lam, h):
-    """Number of RK4 sub-steps for a sample interval h with local rate λ."""
-    hl = h * lam
-    if hl <= cst[K_CACC]:
-        return 1  # the common case, without the division (ceil(hl/c) ≤ 1 exactly when hl ≤ c)
-    n = int(math.ceil(hl / cst[K_CACC]))
-    if n < 1:
-        n = 1
-    nmax = int(cst[K_NMAX])
-    if n > nmax:
-        n = nmax
-    return n
-
-
-@hot
-def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
-    """Integrate ``s`` in place over one sample interval [t, t+h] with RK4.
-
-    ``k1`` must hold f(s, a0) on entry (it is reused for the first sub-step).
-    ``work`` is scratch of shape (5, ns + 3). Inputs are linear in time.
-    The four stages run in one loop with one call of :func:`deriv`, so a
-    compiler that inlines it does so once, not four times.
-    """
-    ns = lay[L_NS]
-    tmp = work[3]
-    am = work[4]
-    inv_n = 1.0 / n_sub  # products below, no division per stage
-    hs = h * inv_n
-    hs6 = hs / 6.0
-    for j in range(n_sub):
-        tj = t + j * hs
-        for st in range(4):
-            if st == 0 and j == 0:
-                continue  # k1 = f(s, a0) was handed in
-            # stage st: the state s + c·hs·k_{st-1} at the time tj + c·hs, c = 0, ½, ½, 1
-            if st == 0:
-                c = 0.0
-            elif st == 3:
-                c = 1.0
-            else:
-                c = 0.5
-            f = (j + c) * inv_n
-            for q in range(3):
-                am[q] = a0[q] + f * (a1[q] - a0[q])
-            if st == 0:
-                for q in range(ns):
-                    tmp[q] = s[q]
-            else:
-                kp = k1 if st == 1 else work[st - 2]
-                for q in range(ns):
-                    tmp[q] = s[q] + c * hs * kp[q]
-            kn = k1 if st == 0 else work[st - 1]
-            deriv(lay, cst, p, tj + c * hs, am, tmp, kn)
-        k2 = work[0]
-        k3 = work[1]
-        k4 = work[2]
-        for q in range(ns):
-            s[q] += hs6 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
-        if lay[L_FD] >= 0:
-            _coil_step(lay, p, s, a0[2] + (j * inv_n) * (a1[2] - a0[2]), am[2], hs)
-        if lay[L_SA] >= 0:
-            # amplitude envelope: follows peaks at once, decays with time constant T_env
-            ie = lay[L_SE]
-            xa = abs(am[0]) if lay[L_KIND] == DEVICE else abs(s[0])
-            decayed = s[ie] * math.exp(-hs / cst[K_TENV])
-            s[ie] = xa if xa > decayed else decayed

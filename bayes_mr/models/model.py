@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel, term_kernel
+from . import integrate, kernel, term_kernel
 from .effects import DEVICE_ONLY, ON_COMMAND, Effect
 from .params import F_V, F_X, Coordinates, ParamSpec, Ratio, Scales
 
@@ -83,6 +83,9 @@ class Form:
     derived : tuple of Ratio
         Reported parameters computed from estimated ones (``spencer``'s
         ``x0 = F_pre/k1``); accepted as inputs with their denominator.
+    ros2 : bool
+        Whether stiff intervals may be tried with the Rosenbrock step
+        (:mod:`bayes_mr.models.integrate`); False keeps RK4 for every interval.
     """
 
     name: str
@@ -93,6 +96,7 @@ class Form:
     frame_in_form: bool = True
     fixed: tuple[str, ...] = ()
     derived: tuple[Ratio, ...] = ()
+    ros2: bool = True
 
     def __add__(self, effect: Effect) -> Model:
         return Model(self) + effect
@@ -402,8 +406,12 @@ class Model:
             lay[kernel.L_TP + j] = names.index(e.params[0].name)
             lay[kernel.L_TC + j] = c
 
-    def constants(self, mass: float | None = None, *, c_acc: float = 1.0, n_max: int = 400) -> np.ndarray:
-        """The float64 constants array the kernel reads (mass, envelope time, step control)."""
+    def constants(self, mass: float | None = None, *, c_acc: float = 1.0, n_max: int = 400,
+                  ros2: bool = True) -> np.ndarray:
+        """The float64 constants array the kernel reads (mass, envelope time, step control).
+
+        ``ros2`` False integrates every interval with RK4 (:mod:`bayes_mr.models.integrate`).
+        """
         cst = np.zeros(kernel.CONST_SIZE)
         cst[kernel.K_MASS] = float(mass) if mass else 1.0
         cst[kernel.K_IMASS] = 1.0 / cst[kernel.K_MASS]
@@ -411,6 +419,8 @@ class Model:
         cst[kernel.K_TENV] = float(sa.options["t_env"]) if sa else 1.0
         cst[kernel.K_CACC] = c_acc
         cst[kernel.K_NMAX] = n_max
+        cst[kernel.K_STIFF] = integrate.ROS2_ABOVE if ros2 and self.form.ros2 else np.inf
+        cst[kernel.K_RTOL] = integrate.ROS2_RTOL
         sf = self.effect("stribeck_friction")
         cst[kernel.K_SMOOTH] = float(sf.options["smooth"]) if sf else 0.1
         return cst

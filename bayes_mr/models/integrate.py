@@ -1,0 +1,260 @@
+"""One sample interval of a model's states: the step control and the two integrators.
+
+:func:`substeps` turns the local rate λ of :func:`bayes_mr.models.kernel.rate` into RK4 sub-steps
+per interval (h·λ ≤ c_acc, at most n_max). :func:`advance` integrates the interval
+
+* with **RK4** (thesis 3-9) in that many sub-steps — every interval of a structure or forced test,
+  and the non-stiff ones of a device test;
+* or, in a device test where RK4 would need more than :data:`ROS2_ABOVE` sub-steps, tries one step of
+  **ROS2**, the two-stage Rosenbrock W-method of Verwer, Spee, Blom & Hundsdorfer (1999, SIAM J. Sci.
+  Comput. 20(4), γ = 1 + 1/√2)::
+
+      W k₁ = f(t, s),   W k₂ = f(t + h, s + h k₁) − 2 k₁,   s ← s + (3/2) h k₁ + (1/2) h k₂,
+      W = I − γ h J.
+
+  It is second order for *any* matrix J (a W-method), so J is a forward-difference Jacobian at the
+  interval's start, and the inputs' time dependence (linear in the interval) needs no term of its
+  own: time is a state whose column of J is zero. With J the true Jacobian it is L-stable. Over most
+  stiff intervals a hysteretic state sits on its branch (z at its saturation while the piston moves
+  fast: h·λ is large only because the branch attracts it fast), and one step follows it where RK4
+  needs h·λ ≤ 2.8, tens of sub-steps. Where a state is in transition (a velocity reversal) one step
+  cannot follow it, and an L-stable step is not accurate there either (R(−3) = 0.22 against
+  e⁻³ = 0.05), so each step is tested: the embedded first-order solution s + h k₁ differs from it
+  by ½h(k₁ + k₂), and every state must have that within :data:`ROS2_RTOL` of its scale (the
+  largest |s_q| met so far in the simulation, so a state crossing zero is not rejected for that);
+  else the interval is integrated again with RK4.
+
+Why device tests only: there every state is a driven hysteretic or lag state and the test reads them
+all. In a structure test the stiff state couples into the frame (ẍ depends on z, ż on ẋ), whose
+states such a test cannot read — the first-order estimate of a smooth state is ½h²ẍ, which would
+reject every interval of a 10-Hz response at 1 kHz — and measured against solve_ivp the adaptive
+step lost up to four orders of accuracy there (dahl σ = 2e5: 5.8e-4 → 4.1e-3 of the SD; with six
+effects 7.8e-6 → 0.83), while on device tests it held RK4's error on every form and effect tried
+(``tests/test_integrate.py``) and cut the cost of the packaged damper's least-squares optima 2.3–5×.
+``spencer`` opts out (``Form.ros2``).
+
+Both integrators evaluate the right-hand side from one call site, so the kernels that inline
+:func:`~bayes_mr.models.kernel.deriv` (:mod:`bayes_mr._specialise`) inline it once. The method an
+interval took is returned, and the drivers store it in the schedule (a negative count for ROS2), so
+a replayed schedule (finite differences on one grid, :mod:`bayes_mr.simulate`) replays the method.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._jit import hot
+from .kernel import DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv
+from .kernel_effects import _coil_step
+
+#: γ of ROS2 (Verwer et al. 1999): 1 + 1/√2, the root that makes the method L-stable.
+GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
+#: Scratch rows :func:`advance` needs besides the ns × ns W: RK4's stages k₂..k₄ (ROS2's k₂, k₁ and the
+#: pivots), the stage state, the inputs, and the largest |s_q| met so far in the simulation (the error test's
+#: scale; kept from interval to interval).
+WORK_ROWS = 6
+
+
+@hot(inline="always")
+def work_shape(ns):
+    """Shape of :func:`advance`'s scratch for a model of ``ns`` states: :data:`WORK_ROWS` rows and the ns × ns W."""
+    return WORK_ROWS + ns, max(ns, 3)
+
+
+@hot
+def substeps(lay, cst, lam, h):
+    """Number of RK4 sub-steps for a sample interval h with local rate λ."""
+    hl = h * lam
+    if hl <= cst[K_CACC]:
+        return 1  # the common case, without the division (ceil(hl/c) ≤ 1 exactly when hl ≤ c)
+    n = int(math.ceil(hl / cst[K_CACC]))
+    if n < 1:
+        n = 1
+    nmax = int(cst[K_NMAX])
+    if n > nmax:
+        n = nmax
+    return n
+
+
+@hot(inline="always")
+def _lu(work, ns):
+    """LU factorisation with partial pivoting of W = work[WORK_ROWS:, :ns] in place; pivots in work[2]."""
+    for c in range(ns):
+        pr = c
+        best = abs(work[WORK_ROWS + c, c])
+        for r in range(c + 1, ns):
+            v = abs(work[WORK_ROWS + r, c])
+            if v > best:
+                best = v
+                pr = r
+        work[2, c] = pr
+        if pr != c:
+            for q in range(ns):
+                tmp = work[WORK_ROWS + c, q]
+                work[WORK_ROWS + c, q] = work[WORK_ROWS + pr, q]
+                work[WORK_ROWS + pr, q] = tmp
+        inv = 1.0 / work[WORK_ROWS + c, c]
+        for r in range(c + 1, ns):
+            f = work[WORK_ROWS + r, c] * inv
+            work[WORK_ROWS + r, c] = f
+            for q in range(c + 1, ns):
+                work[WORK_ROWS + r, q] -= f * work[WORK_ROWS + c, q]
+
+
+@hot(inline="always")
+def _solve(work, ns, b):
+    """Solve W x = b in place with the factors of :func:`_lu`."""
+    for c in range(ns):
+        pr = int(work[2, c])
+        if pr != c:
+            tmp = b[c]
+            b[c] = b[pr]
+            b[pr] = tmp
+        for r in range(c + 1, ns):
+            b[r] -= work[WORK_ROWS + r, c] * b[c]
+    for c in range(ns - 1, -1, -1):
+        acc = b[c]
+        for q in range(c + 1, ns):
+            acc -= work[WORK_ROWS + c, q] * b[q]
+        b[c] = acc / work[WORK_ROWS + c, c]
+
+
+@hot(inline="always")
+def _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs):
+    """The discrete updates between sub-steps: the coil's exact lag and the amplitude envelope."""
+    if lay[L_FD] >= 0:
+        _coil_step(lay, p, s, a0[2] + (j * inv_n) * (a1[2] - a0[2]), am[2], hs)
+    if lay[L_SA] >= 0:
+        # amplitude envelope: follows peaks at once, decays with time constant T_env
+        ie = lay[L_SE]
+        xa = abs(am[0]) if lay[L_KIND] == DEVICE else abs(s[0])
+        decayed = s[ie] * math.exp(-hs / cst[K_TENV])
+        s[ie] = xa if xa > decayed else decayed
+
+
+#: RK4 sub-steps an interval must need before ROS2 is tried on it: at 1 or 2, RK4 (4 or 8 evaluations of the
+#: right-hand side) costs about what a ROS2 trial does (ns + 1, and RK4's on top when the test rejects it).
+ROS2_ABOVE = 2
+#: Relative error test of a ROS2 interval (module docstring). Measured against RK4 at c_acc = 0.05 on the
+#: packaged damper's device test at each form's least-squares optimum (1 kHz): the force error of RK4 at
+#: c_acc = 1 (1.2e-3 to 2.8e-3 of the SD; bouc-wen 1.7e-4 → 7.7e-4) with ROS2 kept in 54-68 % of the
+#: intervals; 1e-4 kept fewer for no gain, and at 1e-2 a stiff spencer device test's error grew five-fold.
+ROS2_RTOL = 1e-3
+
+#: ``mode`` of :func:`advance`: choose by the error test, RK4, or ROS2 (the last two replay a schedule).
+DECIDE, RK4, ROS2 = 0, 1, 2
+
+
+@hot
+def _ros2(lay, cst, p, t, h, a0, a1, s, k1, check, work):
+    """One ROS2 step over [t, t+h] (module docstring); True when it was taken, False when ``check``'s error
+    test rejected it (``s`` then untouched). ``k1`` = f(s, a0) is read, not overwritten.
+
+    Not inlined into :func:`advance` (``_specialise.INLINE``): a second inlined copy of ``deriv`` there would
+    double the compile of every specialised kernel, and the RK4 loop keeps its own shape (its four stages
+    unrolled: a shared evaluation loop cost the dahl structure step 31 → 41 ns, measured).
+    """
+    ns = lay[L_NS]
+    kr = work[1]  # ROS2's k₁ (solved in place), the caller's k1 kept for RK4
+    tmp = work[3]
+    am = work[4]
+    smax = work[5]  # the largest |s_q| met so far in this scratch's simulation: the error test's scale
+    for q in range(ns):
+        kr[q] = k1[q]
+        if abs(s[q]) > smax[q]:
+            smax[q] = abs(s[q])
+    # one call site of deriv: e = 0..ns−1 the columns of J (forward differences at (t, s)), e = ns the second
+    # stage at (t + h, s + h k₁) (the first stage's f(t, s) is k1)
+    dq = 1.0
+    for e in range(ns + 1):
+        for q in range(ns):
+            tmp[q] = s[q]
+        if e < ns:
+            dq = 1e-7 * abs(s[e]) + 1e-9
+            tmp[e] += dq
+            for q in range(3):
+                am[q] = a0[q]
+            tc = t
+        else:
+            _lu(work, ns)
+            _solve(work, ns, kr)
+            for q in range(ns):
+                tmp[q] += h * kr[q]
+            for q in range(3):
+                am[q] = a1[q]
+            tc = t + h
+        deriv(lay, cst, p, tc, am, tmp, work[0])
+        if e < ns:
+            w = -GAMMA * h / dq
+            for r in range(ns):  # W = I − γ h J, a column at a time
+                work[WORK_ROWS + r, e] = w * (work[0, r] - k1[r])
+            work[WORK_ROWS + e, e] += 1.0
+    k2 = work[0]
+    for q in range(ns):
+        k2[q] -= 2.0 * kr[q]
+    _solve(work, ns, k2)
+    if check:
+        for q in range(ns):
+            d = 1.5 * h * kr[q] + 0.5 * h * k2[q]
+            if abs(0.5 * h * (kr[q] + k2[q])) > cst[K_RTOL] * max(abs(s[q]), abs(s[q] + d), smax[q]):
+                return False
+    for q in range(ns):
+        s[q] += 1.5 * h * kr[q] + 0.5 * h * k2[q]
+    _after_substep(lay, cst, p, s, a0, a1, am, 0, 1.0, h)
+    return True
+
+
+@hot
+def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
+    """Integrate ``s`` in place over one sample interval [t, t+h] (module docstring).
+
+    ``k1`` must hold f(s, a0) on entry (it is reused for the first sub-step).
+    ``work`` is scratch of shape :func:`work_shape` (ns). Inputs are linear in
+    time. ``n_sub`` is the RK4 sub-step count of :func:`substeps`; ``mode``
+    :data:`DECIDE` tries ROS2 in a device test where n_sub > ``cst[K_STIFF]``
+    and keeps it where its error test passes, else takes RK4; :data:`RK4` and
+    :data:`ROS2` force a method (a replayed schedule). Returns True when ROS2
+    was taken. RK4's four stages run in one loop with one call of
+    :func:`deriv`, so a compiler that inlines it does so once, not four times.
+    """
+    # the kind first: in a kernel specialised to a structure test it is a constant and the ROS2 branch folds away
+    if lay[L_KIND] == DEVICE and (mode == ROS2 or (mode == DECIDE and n_sub > cst[K_STIFF])):
+        if _ros2(lay, cst, p, t, h, a0, a1, s, k1, mode == DECIDE, work):
+            return True
+    ns = lay[L_NS]
+    tmp = work[3]
+    am = work[4]
+    inv_n = 1.0 / n_sub  # products below, no division per stage
+    hs = h * inv_n
+    hs6 = hs / 6.0
+    for j in range(n_sub):
+        tj = t + j * hs
+        for st in range(4):
+            if st == 0 and j == 0:
+                continue  # k1 = f(s, a0) was handed in
+            # stage st: the state s + c·hs·k_{st-1} at the time tj + c·hs, c = 0, ½, ½, 1
+            if st == 0:
+                c = 0.0
+            elif st == 3:
+                c = 1.0
+            else:
+                c = 0.5
+            f = (j + c) * inv_n
+            for q in range(3):
+                am[q] = a0[q] + f * (a1[q] - a0[q])
+            if st == 0:
+                for q in range(ns):
+                    tmp[q] = s[q]
+            else:
+                kp = k1 if st == 1 else work[st - 2]
+                for q in range(ns):
+                    tmp[q] = s[q] + c * hs * kp[q]
+            kn = k1 if st == 0 else work[st - 1]
+            deriv(lay, cst, p, tj + c * hs, am, tmp, kn)
+        k2 = work[0]
+        k3 = work[1]
+        k4 = work[2]
+        for q in range(ns):
+            s[q] += hs6 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+        _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs)
+    return False
