@@ -129,3 +129,9 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
                     "normalized-bouc-wen: 6 free parameters.")
     assert _posterior_lines(rows[:1], "dahl", {}) == [
         "emcee posteriors for dahl (3250 steps; R-hat_max 1.01): converged (≥ 50 τ, R-hat < 1.01)."]
+    projected = {"engine": "mcmc", "model": "spencer", "n_steps": 300, "tau_max": 25.0, "rhat_max": 1.7,
+                 "converged": False, "stopped": "projected",
+                 "projection": {"tau_max": 25.0, "steps_needed": 1375, "seconds_needed": 412.4, "budget_s": 90.0}}
+    chains, = _posterior_lines([projected], "spencer", {})
+    assert ("spencer (stopped when its integrated time (25 steps) projected the rule to ~1375 steps, ~412 s "
+            "against the 90 s left: 300 steps = 12 τ, R-hat 1.7) NOT converged") in chains

@@ -31,7 +31,8 @@ class MCMCResult:
     converged : bool
         The stopping rule was met.
     stopped : str
-        Why the run ended: ``"converged"``, ``"max_steps"`` or ``"max_seconds"``.
+        Why the run ended: ``"converged"``, ``"max_steps"``, ``"max_seconds"`` or
+        ``"projected"`` (the rule projected past ``max_seconds``; see ``projection``).
     wall_s : float
         Wall time of this call, its pilot included (a resumed run counts only its own part) [s].
     seed_entropy : str
@@ -43,6 +44,10 @@ class MCMCResult:
     pilot_steps : int
         Steps of the pilot chain run before this one to fit the independence
         proposal (0: none); they are not in ``chain``.
+    projection : dict or None
+        With ``stopped == "projected"``: ``tau_max``, ``steps_needed``,
+        ``seconds_needed`` and ``budget_s``
+        (:func:`bayes_mr.inference.convergence.projection`).
     """
 
     chain: np.ndarray
@@ -60,6 +65,7 @@ class MCMCResult:
     names: tuple[str, ...] = ()
     history: list = field(default_factory=list)
     pilot_steps: int = 0
+    projection: dict | None = None
 
     @property
     def n_steps(self) -> int:

@@ -5,7 +5,9 @@ half of the chain, burn-in ⌈``burn_tau_multiple`` · τ₀⌉ (at most half), 
 converged when the chain after burn-in is ``min_tau_multiple`` times its
 longest integrated time *and* every coordinate's rank-normalised split R-hat
 (walkers as chains) is below ``rhat_max``. :func:`run_until_converged` drives
-a sampler by that rule, within ``max_steps`` and an optional wall-time budget.
+a sampler by that rule, within ``max_steps`` and an optional wall-time budget;
+with a budget, a chain whose own integrated time projects the rule past it
+stops at that check (:func:`projection`) instead of running into the limit.
 """
 
 from __future__ import annotations
@@ -69,6 +71,46 @@ def convergence_check(chain: np.ndarray, settings) -> dict:
     return {"burn": burn, "tau": tau, "rhat": rhat, "ess": ess, "converged": converged}
 
 
+#: Steps of this run a budget projection needs before it is trusted (two checks at the default 50).
+MIN_PROJECTION_STEPS = 100
+
+
+def projection(tau_max: float, step: int, steps_run: int, elapsed: float, budget: float, settings) -> dict | None:
+    """Whether the rule can still be met within the budget, from the chain's integrated time so far.
+
+    The rule needs a chain of about (``burn_tau_multiple`` + ``min_tau_multiple``) · τ steps (burn-in and
+    the ≥ 50 τ after it); at the measured seconds per step this run has taken, the steps still missing
+    are projected. τ estimated from a short chain is low, so the projection is optimistic: it stops a chain
+    that cannot converge (spencer on the packaged damper: τ 23 after 315 steps, ~5000 needed at τ ≈ 99),
+    never one that could. R-hat is not projected.
+
+    Parameters
+    ----------
+    tau_max : float
+        Longest integrated time at this check [steps].
+    step : int
+        Steps of the chain so far (stored ones included).
+    steps_run : int
+        Steps this run has taken (the per-step time is theirs).
+    elapsed, budget : float
+        Seconds this run has taken, and its budget [s].
+    settings : MCMCSettings
+
+    Returns
+    -------
+    dict or None
+        None while the rule may still be met (or too few steps to tell); else ``tau_max``,
+        ``steps_needed``, ``seconds_needed`` (this run's, from its start) and ``budget_s``.
+    """
+    if not (math.isfinite(budget) and math.isfinite(tau_max)) or steps_run < MIN_PROJECTION_STEPS:
+        return None
+    need = int(math.ceil((settings.burn_tau_multiple + settings.min_tau_multiple) * tau_max))
+    seconds = elapsed + max(need - step, 0) * elapsed / steps_run
+    if seconds <= budget:
+        return None
+    return {"tau_max": tau_max, "steps_needed": need, "seconds_needed": seconds, "budget_s": budget}
+
+
 def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict, list[dict]]:
     """Advance an emcee sampler in blocks of ``check_every`` steps until the rule, ``max_steps`` or the budget.
 
@@ -90,13 +132,15 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
     -------
     diag : dict
         The last :func:`convergence_check`, with ``stopped`` (``"converged"``,
-        ``"max_steps"`` or ``"max_seconds"``).
+        ``"max_steps"``, ``"max_seconds"`` or ``"projected"``: the rule
+        projected past the budget, :func:`projection`, whose dict is then
+        ``diag["projection"]``).
     history : list of dict
         Each check: step, burn, tau_max, rhat_max.
     """
     t0 = time.perf_counter()
     budget = math.inf if settings.max_seconds is None else float(settings.max_seconds)
-    it = int(sampler.iteration)
+    it = it0 = int(sampler.iteration)
     history: list[dict] = []
     bar = progress_bar(settings.max_steps, "emcee", unit="step", enabled=settings.progress, initial=it)
     try:
@@ -109,10 +153,14 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
                 bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
                                 N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
                                 rhat=f"{diag['rhat'].max():.3f}")
-                if diag["converged"] or it >= settings.max_steps or out_of_time:
+                ahead = None if diag["converged"] else projection(
+                    float(diag["tau"].max()), it, it - it0, time.perf_counter() - t0, budget, settings)
+                if diag["converged"] or it >= settings.max_steps or out_of_time or ahead:
                     diag["stopped"] = ("converged" if diag["converged"]
-                                       else "max_steps" if it >= settings.max_steps else "max_seconds")
+                                       else "max_steps" if it >= settings.max_steps
+                                       else "max_seconds" if out_of_time else "projected")
                     diag["converged"] = diag["converged"] and not out_of_time
+                    diag["projection"] = ahead if diag["stopped"] == "projected" else None
                     break
             target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
             # one step at a time through the generator so the bar moves; the backend saves every step

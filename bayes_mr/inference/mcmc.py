@@ -102,10 +102,10 @@ class MCMCSettings:
     max_steps : int
         Hard limit on steps (the result is then flagged not converged).
     max_seconds : float or None
-        Wall-time budget of the call [s]: the run stops after the step that
-        exceeds it, is checked there and flagged not converged (``stopped`` says
-        why). A budgeted run is a function of the machine's speed, so it is not
-        reproducible step for step; None (default) has no budget.
+        Wall-time budget of the call [s]: the run stops after the step that exceeds it, or at an earlier
+        check where its own integrated time projects the rule past it (``"projected"``,
+        :func:`~.convergence.projection`), flagged not converged (``stopped`` says why). A budgeted run
+        depends on the machine's speed, so it is not reproducible step for step; None (default): no budget.
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
@@ -324,7 +324,7 @@ def sample(
         seed_entropy=entropy,
         names=names,
         history=history,
-        pilot_steps=pilot_steps,
+        pilot_steps=pilot_steps, projection=diag.get("projection"),
     )
 
 

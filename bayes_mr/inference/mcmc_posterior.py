@@ -68,6 +68,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         "tau_max": float(np.max(result.tau)), "rhat_max": float(np.max(result.rhat)),
         "ess_min": float(np.min(result.ess)), "acceptance": float(np.mean(result.acceptance)),
         "converged": bool(result.converged), "stopped": result.stopped, "seed_entropy": result.seed_entropy,
+        "projection": result.projection,
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)

@@ -140,6 +140,15 @@ def second_record_sentence(summary: dict) -> str | None:
     return line + ("; ".join(parts) or "no fit could predict it") + "."
 
 
+def _stop_reason(row: dict, why: dict[str, str]) -> str:
+    """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need."""
+    p = row.get("projection")
+    if row.get("stopped") == "projected" and p:
+        return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps) projected the rule to "
+                f"~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s against the {p['budget_s']:.0f} s left")
+    return why.get(row.get("stopped"), "budget")
+
+
 def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str]) -> list[str]:
     """The headline's emcee sentence: which posteriors converged, which did not and why (the chain's length in
     integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked), and which forms
@@ -148,7 +157,7 @@ def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, 
     why = {"max_steps": "step limit", "max_seconds": "time limit"}
     lines = []
     if chains:
-        unconverged = [f"{r['model']} ({why.get(r.get('stopped'), 'budget')}: {r.get('n_steps')} steps = "
+        unconverged = [f"{r['model']} ({_stop_reason(r, why)}: {r.get('n_steps')} steps = "
                        f"{fmt((r.get('n_steps') or 0) / r['tau_max'], 2) if r.get('tau_max') else '?'} τ, "
                        f"R-hat {fmt(r.get('rhat_max'), 3)})" for r in chains if not r.get("converged")]
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
