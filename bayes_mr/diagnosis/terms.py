@@ -248,9 +248,11 @@ def search_terms(record: xr.Dataset, fit: Fit, *, seed: int = 0, threshold: floa
     whole = _refit_on(record, current)
     p = whole.params()
     out["model"] = whole.name
+    # every parameter of the model with the terms, as ``extended`` carries: what predicts another record (the
+    # kept terms' coefficients alone, on the form's defaults, drew the main job's part-B figure far off)
+    out["params"] = {k: _num(v) for k, v in p.items()}
     for name in kept:
         pname = lib.make(name, whole.model.form.name).params[0].name
-        out["params"][pname] = _num(p[pname])
         out["sentences"].append(sentence(name, p[pname], whole.model.form.name))
     out.update(mse_ratio=_num(whole.mse / fit.mse),
                delta_log_evidence=_num(whole.result.log_evidence - fit.result.log_evidence))

@@ -6,6 +6,7 @@ import pytest
 from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.library import library
 from bayes_mr.diagnosis.terms import MIN_BLOCKS, folds, search_terms
+from bayes_mr.identify import predict
 from bayes_mr.likelihood import record_scales
 from bayes_mr.models import get_model
 from bayes_mr.models import terms as lib
@@ -66,6 +67,10 @@ def test_search_finds_and_refits_a_term_outside_the_vocabulary():
     sc = record_scales(signal_record("dahl", "device", **OPTS))
     assert out["params"]["tf_xd_ax"] == pytest.approx(theta_true / (sc.displacement * sc.velocity), rel=0.1)
     assert "grows with ẋ·|x|" in out["sentences"][0]
+    # the JSON's model and params are the whole fitted model: they predict what the fit predicts
+    assert set(out["params"]) == set(whole.params())
+    np.testing.assert_allclose(predict(out["model"], rec, out["params"])["force"], whole.predicted["force"],
+                               rtol=1e-9, atol=1e-9 * np.abs(whole.predicted["force"]).max())
 
 
 def test_search_keeps_nothing_on_a_clean_record():
