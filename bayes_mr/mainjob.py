@@ -129,10 +129,13 @@ class Budget:
 #: 17.8 at 250 Hz with the same budget (issue 16). Every form is offered an emcee posterior that runs
 #: until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 150 s (``max_seconds``), unless one step
 #: at its least-squares optimum projects the pilot and a minimal chain past those 150 s
-#: (:mod:`bayes_mr.inference.budget`; the headline names it and gives the numbers). Measured on this
-#: record (2 cores): spencer 0.38 s per step of its 56 walkers (~192 s projected), normalized-bouc-wen
-#: 0.79 s of 28 (~393 s), bouc-wen 0.58 s of 24 (~288 s) — none started; until this round a count of
-#: free parameters (> 5) left the first two out without a measurement. With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
+#: (:mod:`bayes_mr.inference.budget`; the headline names it and gives the numbers), and a chain whose own
+#: integrated time projects the rule past them stops there (``stopped`` "projected"). Measured on this
+#: record (2 cores) with RK4 alone: spencer 0.38 s per step of its 56 walkers (~192 s projected),
+#: normalized-bouc-wen 0.79 s of 28 (~393 s), bouc-wen 0.58 s of 24 (~288 s) — none started. With the
+#: Rosenbrock step on stiff device intervals (bayes_mr.models.integrate; issue 16, round 3) normalized-bouc-wen
+#: costs ~0.09 s a step and converges in ~130 s (1400 steps, τ 12), and bouc-wen and spencer start but stop
+#: on their projection after 100-150 steps (τ 7 and 11 there, R-hat 1.7-2.1). With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
 #: dahl converged at 450 steps (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and
 #: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
 #: stiffness k sits on its lower bound on this record, and least squares' covariance gave it an SD of
