@@ -28,15 +28,17 @@ Why device tests only: there every state is a driven hysteretic or lag state and
 all. In a structure test the stiff state couples into the frame (ẍ depends on z, ż on ẋ), whose
 states such a test cannot read — the first-order estimate of a smooth state is ½h²ẍ, which would
 reject every interval of a 10-Hz response at 1 kHz — and measured against solve_ivp the adaptive
-step lost up to four orders of accuracy there (dahl σ = 2e5: 5.8e-4 → 4.1e-3 of the SD; with six
-effects 7.8e-6 → 0.83), while on device tests it held RK4's error on every form and effect tried
-(``tests/test_integrate.py``) and cut the cost of the packaged damper's least-squares optima 2.3–5×.
-``spencer`` opts out (``Form.ros2``).
+step lost one to four orders of accuracy there, with or without the frame's states under the test
+(dahl σ = 2e5: 5.8e-4 → 3.1e-3 to 4.1e-3 of the SD; with six effects 7.8e-6 → 1.5e-2 to 0.83),
+while on device tests it held RK4's error on every form and effect tried (``tests/test_integrate.py``)
+and cut the cost of the packaged damper's least-squares optima 2.5–5×. ``spencer`` opts out
+(``Form.ros2``).
 
-Both integrators evaluate the right-hand side from one call site, so the kernels that inline
-:func:`~bayes_mr.models.kernel.deriv` (:mod:`bayes_mr._specialise`) inline it once. The method an
-interval took is returned, and the drivers store it in the schedule (a negative count for ROS2), so
-a replayed schedule (finite differences on one grid, :mod:`bayes_mr.simulate`) replays the method.
+Each integrator evaluates the right-hand side from one call site, and ROS2 is a function of its own
+(not inlined into :func:`advance`), so a kernel that inlines :func:`~bayes_mr.models.kernel.deriv`
+(:mod:`bayes_mr._specialise`) inlines it once in each. The method an interval took is returned, and
+the drivers store it in the schedule (a negative count for ROS2), so a replayed schedule (finite
+differences on one grid, :mod:`bayes_mr.simulate`) replays the method.
 """
 
 from __future__ import annotations
@@ -137,7 +139,7 @@ def _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs):
 ROS2_ABOVE = 2
 #: Relative error test of a ROS2 interval (module docstring). Measured against RK4 at c_acc = 0.05 on the
 #: packaged damper's device test at each form's least-squares optimum (1 kHz): the force error of RK4 at
-#: c_acc = 1 (1.2e-3 to 2.8e-3 of the SD; bouc-wen 1.7e-4 → 7.7e-4) with ROS2 kept in 54-68 % of the
+#: c_acc = 1 (1.2e-3 to 2.8e-3 of the SD; bouc-wen 1.7e-4 → 2.6e-4) with ROS2 kept in 54-68 % of the
 #: intervals; 1e-4 kept fewer for no gain, and at 1e-2 a stiff spencer device test's error grew five-fold.
 ROS2_RTOL = 1e-3
 
