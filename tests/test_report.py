@@ -124,14 +124,18 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
             {"engine": "lsq", "model": "spencer"}]
     skipped = {"normalized-bouc-wen": "6 free parameters", "spencer": "13 free parameters"}
     chains, none = _posterior_lines(rows, "spencer", skipped)
-    assert "lugre (step limit: 1000 steps = 40 τ, R-hat 1.04) NOT converged" in chains and "dahl (" not in chains
+    assert "lugre (step limit: 1000 steps = 40 τ, R-hat 1.0400) NOT converged" in chains and "dahl (" not in chains
     assert none == ("No emcee posterior for spencer (the selected model): 13 free parameters; "
                     "normalized-bouc-wen: 6 free parameters.")
     assert _posterior_lines(rows[:1], "dahl", {}) == [
-        "emcee posteriors for dahl (3250 steps; R-hat_max 1.01): converged (≥ 50 τ, R-hat < 1.01)."]
+        "emcee posteriors for dahl (3250 steps; R-hat_max 1.0080): converged (≥ 50 τ, R-hat < 1.01)."]
     projected = {"engine": "mcmc", "model": "spencer", "n_steps": 300, "tau_max": 25.0, "rhat_max": 1.7,
                  "converged": False, "stopped": "projected",
                  "projection": {"tau_max": 25.0, "steps_needed": 1375, "seconds_needed": 412.4, "budget_s": 90.0}}
     chains, = _posterior_lines([projected], "spencer", {})
     assert ("spencer (stopped when its integrated time (25 steps) projected the rule to ~1375 steps, ~412 s "
-            "against the 90 s left: 300 steps = 12 τ, R-hat 1.7) NOT converged") in chains
+            "against the 90 s left: 300 steps = 12 τ, R-hat 1.7000) NOT converged") in chains
+    # a chain just over the rule reads as over it (1.0109 is not "1.01"), and a long one in whole τ
+    timed_out = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_seconds", projection=None)
+    chains, = _posterior_lines([timed_out], "spencer", {})
+    assert "spencer (time limit: 1326 steps = 110 τ, R-hat 1.0109) NOT converged" in chains

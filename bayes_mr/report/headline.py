@@ -8,6 +8,8 @@ report's sections' first lines.
 
 from __future__ import annotations
 
+import math
+
 from ..comparison import row_of as _row
 from .markdown import fmt
 
@@ -140,6 +142,16 @@ def second_record_sentence(summary: dict) -> str | None:
     return line + ("; ".join(parts) or "no fit could predict it") + "."
 
 
+def _rhat(value) -> str:
+    """R-hat to four decimals: against the rule's 1.01, 1.0109 must not read as 1.01."""
+    return f"{value:.4f}" if isinstance(value, float) and math.isfinite(value) else fmt(value)
+
+
+def _multiple(value: float) -> str:
+    """A chain's length in integrated times: two digits below 10, whole numbers above (110, not 1.1e+02)."""
+    return fmt(value, 2) if value < 10 else f"{value:.0f}"
+
+
 def _stop_reason(row: dict, why: dict[str, str]) -> str:
     """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need."""
     p = row.get("projection")
@@ -158,11 +170,11 @@ def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, 
     lines = []
     if chains:
         unconverged = [f"{r['model']} ({_stop_reason(r, why)}: {r.get('n_steps')} steps = "
-                       f"{fmt((r.get('n_steps') or 0) / r['tau_max'], 2) if r.get('tau_max') else '?'} τ, "
-                       f"R-hat {fmt(r.get('rhat_max'), 3)})" for r in chains if not r.get("converged")]
+                       f"{_multiple((r.get('n_steps') or 0) / r['tau_max']) if r.get('tau_max') else '?'} τ, "
+                       f"R-hat {_rhat(r.get('rhat_max'))})" for r in chains if not r.get("converged")]
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
                      f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
-                     f"{', '.join(fmt(r.get('rhat_max'), 3) for r in chains)}): "
+                     f"{', '.join(_rhat(r.get('rhat_max')) for r in chains)}): "
                      + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
                         if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
     if skipped:
