@@ -181,7 +181,11 @@ def candidates(lik: OutputError, n: int, seed: int) -> np.ndarray:
 
 
 def stiff(schedule: np.ndarray, cap: int | None) -> np.ndarray:
-    """Whether each simulation (rows of ``schedule``) saturates the sub-step ``cap`` too often to start from."""
+    """Whether each simulation (rows of ``schedule``) saturates the sub-step ``cap`` too often to start from.
+
+    An interval the Rosenbrock step took (a negative count, :mod:`bayes_mr.models.integrate`) passed its
+    error test, so the cap did not limit it: it does not count as saturated.
+    """
     if cap is None:
         return np.zeros(schedule.shape[0], bool)
     return np.mean(schedule >= cap, axis=1) > STIFF_FRACTION

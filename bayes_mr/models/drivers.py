@@ -63,9 +63,9 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
             lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
             n_sub = substeps(lay, cst, lam, h)
             mode = DECIDE
-            schedule[k] = n_sub
-        if advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work) and not use_schedule:
-            schedule[k] = -n_sub
+        took_ros2 = advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work)
+        if not use_schedule:
+            schedule[k] = -n_sub if took_ros2 else n_sub
     return -1
 
 
