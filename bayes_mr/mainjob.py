@@ -135,9 +135,10 @@ class Budget:
 #: normalized-bouc-wen 0.79 s of 28 (~393 s), bouc-wen 0.58 s of 24 (~288 s) — none started. With the
 #: Rosenbrock step on stiff device intervals (bayes_mr.models.integrate; issue 16, round 3) normalized-bouc-wen
 #: costs ~0.09 s a step and converges in ~130 s (1400 steps, τ 12), and bouc-wen and spencer start but stop
-#: on their projection after 100-150 steps (τ 7 and 11 there, R-hat 1.7-2.1). With the sampler's pilot-fitted independence move (200-step pilot, a check every 50 steps)
-#: dahl converged at 450 steps (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and
-#: 84 s), and the job took 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
+#: on their projection after 100-150 steps (τ 7 and 11 there, R-hat 1.7-2.1). With the sampler's
+#: pilot-fitted independence move (200-step pilot, a check every 50 steps) dahl converged at 450 steps
+#: (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and 84 s), and the job took
+#: 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
 #: stiffness k sits on its lower bound on this record, and least squares' covariance gave it an SD of
 #: many box widths until it was capped at one (calibrate.within_prior); the walkers start from that
 #: spread (mirrored into the box, not redrawn), and with it dahl converged at 550 steps (18 s) and lugre

@@ -152,13 +152,17 @@ def _multiple(value: float) -> str:
     return fmt(value, 2) if value < 10 else f"{value:.0f}"
 
 
-def _stop_reason(row: dict, why: dict[str, str]) -> str:
+#: Why an emcee chain stopped unconverged (its ``stopped``), in words: the headline and the bench table.
+STOP_REASONS = {"max_steps": "step limit", "max_seconds": "time limit", "projected": "projection"}
+
+
+def _stop_reason(row: dict) -> str:
     """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need."""
     p = row.get("projection")
     if row.get("stopped") == "projected" and p:
         return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps) projected the rule to "
                 f"~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s against the {p['budget_s']:.0f} s left")
-    return why.get(row.get("stopped"), "budget")
+    return STOP_REASONS.get(row.get("stopped"), "budget")
 
 
 def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str]) -> list[str]:
@@ -166,10 +170,9 @@ def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, 
     integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked), and which forms
     got none (the selected one named first)."""
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
-    why = {"max_steps": "step limit", "max_seconds": "time limit"}
     lines = []
     if chains:
-        unconverged = [f"{r['model']} ({_stop_reason(r, why)}: {r.get('n_steps')} steps = "
+        unconverged = [f"{r['model']} ({_stop_reason(r)}: {r.get('n_steps')} steps = "
                        f"{_multiple((r.get('n_steps') or 0) / r['tau_max']) if r.get('tau_max') else '?'} τ, "
                        f"R-hat {_rhat(r.get('rhat_max'))})" for r in chains if not r.get("converged")]
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
