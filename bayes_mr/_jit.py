@@ -31,6 +31,8 @@ from pathlib import Path
 import numba
 from numba import njit
 
+from ._threads import limit_blas
+
 #: Text that marks a source file as compiling code (its edits change the cache key).
 _MARKERS = (b"@hot", b"@driver", b"njit(")
 
@@ -57,6 +59,7 @@ def _configure_cache() -> None:
 
 
 _configure_cache()
+limit_blas()  # numba's threads do the parallel work; BLAS's own pool would compete with them (bayes_mr._threads)
 
 
 def hot(fn=None, **options):
