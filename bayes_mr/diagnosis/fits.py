@@ -25,7 +25,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import xarray as xr
 
-from ..inference.lsq import LSQResult, LSQSettings, _refine, fit_lsq, laplace
+from ..inference.lsq import LSQResult, LSQSettings, fit_lsq, laplace
+from ..inference.refine import refine
 from ..likelihood import OutputError
 from ..models import Model, get_model
 from ..scores import score
@@ -131,7 +132,7 @@ def converge(lik: OutputError, phi: np.ndarray, *, refined_at: np.ndarray | None
         sd = residual_rms(lik, phi)
         if done is not None and np.max(np.abs(np.log(sd / done))) < 1e-3:
             break
-        phi = _refine(lik, phi, sd, max_nfev).x
+        phi = refine(lik, phi, sd, max_nfev).x
         done = sd
     return phi
 
@@ -198,7 +199,7 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
     for j in order[:n_refine]:
         if not np.isfinite(c[j]):
             continue
-        res = _refine(lik, starts[j], sd, max_nfev)
+        res = refine(lik, starts[j], sd, max_nfev)
         runs.append({"start": int(j), "cost0": float(0.5 * c[j]), "cost": float(res.cost), "phi": res.x,
                      "nfev": int(res.nfev)})
     if not runs:
@@ -280,7 +281,7 @@ def global_refit(fit: Fit, own: list[str], *, seed: int = 0) -> tuple[Fit, dict]
     # every population's best is refined: the order of their DE costs need not be that of the refined ones
     # (measured: six populations, the DE-best refined to MSE ratio 0.0058, another to 0.0031), and so more
     # populations can only help
-    found = min((_refine(lik, r.x, sd, MAX_NFEV) for r in runs), key=lambda r: r.cost)
+    found = min((refine(lik, r.x, sd, MAX_NFEV) for r in runs), key=lambda r: r.cost)
     before = 0.5 * float(costs(lik, phi0[None], sd)[0])
     info.update(cost_before=before, cost_after=float(found.cost), improved=False)
     if not found.cost < before:

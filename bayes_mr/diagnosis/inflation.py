@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..inference.lsq import _Residuals
+from ..inference.refine import Residuals
 from ..likelihood import OutputError
 from ..stats import hac_bandwidth
 
@@ -59,7 +59,7 @@ def design_effect(lik: OutputError, phi: np.ndarray, sigma: np.ndarray, idx: lis
     lam : ndarray (d,)
         The eigenvalues.
     """
-    rf = _Residuals(lik, sigma)
+    rf = Residuals(lik, sigma)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
     n_c = len(lik.channels)

@@ -58,13 +58,13 @@ import time as _time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize
 
 from .. import noise_model
 from ..likelihood import OutputError
 from . import calibrate, evidence_scale
 from .calibrate import hac_covariance
-from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen, stiff
+from .refine import Residuals, refine, standardised
+from .subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen
 
 __all__ = ["STIFF_FRACTION", "LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance",
            "laplace", "linear_names"]
@@ -164,87 +164,6 @@ class LSQResult:
 # --- nonlinear least squares -----------------------------------------------------------
 
 
-def _standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
-    """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
-    if lik.residual.kind == "iid":  # with no masked sample, no boolean-indexed copies (0.7 ms at 30 s, 1 kHz)
-        return (lik.y - yhat) / sd if lik.valid.all() else (lik.y[lik.valid] - yhat[lik.valid]) / sd
-    return lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))[lik.valid] / sd
-
-
-class _Residuals:
-    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian.
-
-    ``cap``: most sub-steps per sample interval (the search's cost cap); a
-    simulation saturating it too often counts as a diverged one.
-    """
-
-    def __init__(self, lik: OutputError, sd: np.ndarray, cap: int | None = None):
-        self.lik = lik
-        self.sd = np.asarray(sd, float)
-        self.schedule = None
-        self.options = {} if cap is None else {"n_max": int(cap)}
-        self.cap = cap
-        self.last = None  # (φ, residual) of the last evaluation that simulated: the Jacobian's base point
-
-    def __call__(self, phi):
-        yhat, sim = self.lik.predict(phi, **self.options)
-        self.schedule = sim.schedule[0]
-        r = _standardised(self.lik, yhat[0], self.sd)
-        self.last = None
-        if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
-            # a diverged (or, while searching, too stiff) simulation is a very bad fit, not a crash
-            worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
-            return np.full(r.size, worst)
-        self.last = (np.array(phi, float), r.ravel())
-        return r.ravel()
-
-    def jacobian(self, phi, central: bool = False):
-        p = phi.size
-        h = 1e-6 * np.maximum(1.0, np.abs(phi))
-        # trust-region asks for J(φ) right after r(φ): the base point is not simulated again (same numbers)
-        known = not central and self.last is not None and np.array_equal(self.last[0], phi)
-        batch = [] if known else [phi]
-        for j in range(p):
-            e = np.zeros(p)
-            e[j] = h[j]
-            batch.append(phi + e)
-            if central:
-                batch.append(phi - e)
-        if self.schedule is None:
-            self(phi)
-        yhat, _ = self.lik.predict(np.array(batch), schedule=self.schedule)
-        r = ([self.last[1]] if known else []) + [_standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
-        # a perturbed simulation that diverges says nothing about the slope: treat it as flat
-        r = [ri if np.all(np.isfinite(ri)) else r[0] for ri in r]
-        if not np.all(np.isfinite(r[0])):
-            return np.zeros((r[0].size, p))
-        J = np.empty((r[0].size, p))
-        for j in range(p):
-            if central:
-                J[:, j] = (r[1 + 2 * j] - r[2 + 2 * j]) / (2 * h[j])
-            else:
-                J[:, j] = (r[1 + j] - r[0]) / h[j]
-        return J
-
-
-#: Relative cost tolerance of the trust-region refinement: it stops after an accepted step that lowers
-#: ½Σr² by less than FTOL of itself. The cost of standardised residuals is about half their number, so this is
-#: ~1.5e-6 in log-likelihood on a 30-s, 1-kHz, two-channel record (3e4) and 5e-5 on 1e6 residuals — far below
-#: any difference the package reports or decides on. Measured on the bench's diagnose (70 refinements): with
-#: 1e-12, 36 % of the simulations were spent after the cost was within 1e-10 of its final value (the last two
-#: or three accepted steps lower it by ~1e-9 relative, then the trust region shrinks to ``xtol``).
-FTOL = 1e-10
-
-
-def _refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
-            cap: int | None = None) -> optimize.OptimizeResult:
-    res_fn = _Residuals(lik, sd, cap)
-    lo, hi = lik.phi_lo, lik.phi_hi
-    x0 = np.clip(phi0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-    return optimize.least_squares(
-        res_fn, x0, jac=res_fn.jacobian, bounds=(lo, hi), method="trf",
-        x_scale="jac", xtol=1e-12, ftol=FTOL, gtol=1e-12, max_nfev=max_nfev,
-    )
 
 
 def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
@@ -264,9 +183,9 @@ def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
     phi0 = np.asarray(phi0, float)
     yhat, sim = lik.predict(phi0)  # one simulation for σ and the starting cost
     sd = _ml_sd(lik, yhat[0]) if lik.noise == "sampled" else np.asarray(lik.noise_sd, float)
-    r0 = _standardised(lik, yhat[0], sd)
+    r0 = standardised(lik, yhat[0], sd)
     cost0 = 0.5 * float(np.sum(r0**2)) if sim.ok[0] and np.all(np.isfinite(r0)) else math.inf
-    res = _refine(lik, phi0, sd, max_nfev)
+    res = refine(lik, phi0, sd, max_nfev)
     improved = bool(np.all(np.isfinite(res.x)) and res.cost < cost0)
     phi = res.x if improved else phi0
     return {"phi": phi, "delta": phi - phi0, "nfev": int(res.nfev), "improved": improved}
@@ -298,14 +217,14 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         # the starts race on the head (an eighth of the evaluations each, then the better half twice as many, …)
         head = _head(lik, settings.head_samples)
         runs = _search(head, settings, say, max(settings.max_nfev // 8, 1), race=True)
-        phi = _refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
+        phi = refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
         say(f"best start (raced on the first {settings.head_samples} samples) refined on all {n}")
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
         yhat, _ = lik.predict(phi)
         sd = _ml_sd(lik, yhat[0])
-        res = _refine(lik, phi, sd, settings.max_nfev)
+        res = refine(lik, phi, sd, settings.max_nfev)
         phi = res.x
     return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
                    replicas=settings.input_noise_replicas)
@@ -335,7 +254,7 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
     alive, budget = list(runs), max_nfev
     while alive:
         for run in alive:
-            res = _refine(lik, run["phi"], lik.noise_sd.copy(), budget, cap)
+            res = refine(lik, run["phi"], lik.noise_sd.copy(), budget, cap)
             run.update(phi=res.x, cost=float(res.cost), nfev=run["nfev"] + int(res.nfev), status=int(res.status),
                        message=str(res.message))
             say(f"start {run['start']}/{len(runs)}: cost {res.cost:.4g} after {run['nfev']} evaluations")
@@ -402,7 +321,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         lik.choose_residual_orders(phi)
     # sampled: σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
     sigma = _ml_sd(lik, yhat[0]) if sampled else np.asarray(lik.noise_sd, float)
-    rf = _Residuals(lik, sigma)
+    rf = Residuals(lik, sigma)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
     JtJ = J.T @ J

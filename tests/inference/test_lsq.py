@@ -268,7 +268,7 @@ BW_FORCED = {"c": 200.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0,
 
 
 def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
-    from bayes_mr.inference.lsq import _Residuals
+    from bayes_mr.inference.refine import Residuals
     from bayes_mr.inference.subfit import screen
 
     lik = OutputError("bouc-wen", _forced_bouc_wen(BW_FORCED, seed=1))
@@ -282,14 +282,14 @@ def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
     # capped, it saturates the cap or (RK4 past its stability limit) diverges within a few samples: cheap either way
     _, sim = lik.predict(corner, n_max=32)
     assert (not sim.ok[0]) or np.mean(sim.schedule[0] >= 32) > 0.1
-    res = _Residuals(lik, lik.noise_sd, cap=32)
+    res = Residuals(lik, lik.noise_sd, cap=32)
     r = res(corner)
     assert np.all(r == r[0]) and r[0] > 1e3  # scored as a diverged simulation: the optimiser steps away
     # trust-region then asks for the slope there: a finite Jacobian, not a crash (make run at 1 kHz met this
     # with a normalized-bouc-wen start: the base point's residual was not kept, and was read all the same)
     J = res.jacobian(corner)
     assert J.shape == (r.size, corner.size) and np.all(np.isfinite(J))
-    assert np.all(np.isfinite(_Residuals(lik, lik.noise_sd)(corner)))  # uncapped it is a (costly) finite fit
+    assert np.all(np.isfinite(Residuals(lik, lik.noise_sd)(corner)))  # uncapped it is a (costly) finite fit
     starts = screen(lik, 48, 4, 0, cap=32)
     _, sims = lik.predict(np.array(starts), n_max=32)
     assert np.all(np.mean(sims.schedule >= 32, axis=1) <= 0.1)
