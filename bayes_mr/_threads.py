@@ -38,14 +38,10 @@ def blas_threads() -> int:
     raw = os.environ.get(ENV, "").strip()
     if not raw:
         return 1
-    try:
-        n = int(raw)
-    except ValueError:
-        n = -1
-    if n < 0:
+    if not (raw.isascii() and raw.isdigit()):
         raise ValueError(f"${ENV}={raw!r}: expected a non-negative integer (threads per BLAS library; "
                          "0 leaves BLAS's own setting alone)")
-    return n
+    return int(raw)
 
 
 def limit_blas() -> None:
