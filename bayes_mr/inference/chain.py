@@ -42,8 +42,10 @@ class MCMCResult:
     history : list of dict
         Each convergence check: step, burn, tau_max, rhat_max.
     pilot_steps : int
-        Steps of the pilot chain run before this one to fit the independence
-        proposal (0: none); they are not in ``chain``.
+        Steps run before this chain to fit the independence proposal: the
+        pilot and the adaptation rounds (0: none); they are not in ``chain``.
+    adapt_acceptance : tuple of float
+        Mean acceptance of each adaptation round (:func:`bayes_mr.inference.mcmc.sample`).
     projection : dict or None
         With ``stopped == "projected"``: ``tau_max``, ``steps_needed``,
         ``seconds_needed`` and ``budget_s``
@@ -65,6 +67,7 @@ class MCMCResult:
     names: tuple[str, ...] = ()
     history: list = field(default_factory=list)
     pilot_steps: int = 0
+    adapt_acceptance: tuple = ()
     projection: dict | None = None
 
     @property

@@ -6,13 +6,8 @@ import pytest
 from bayes_mr.inference.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.mcmc_posterior import mcmc_posterior
 from bayes_mr.stats import integrated_times
-from bayes_mr.inference.mcmc import (
-    MCMCSettings,
-    fit_mcmc,
-    initial_walkers,
-    reflect_into,
-    sample,
-)
+from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, sample
+from bayes_mr.inference.walkers import initial_walkers, reflect_into
 
 
 def correlated_gaussian(d, seed):
@@ -97,7 +92,9 @@ def test_independence_move_alone_is_exact_with_a_wrong_proposal():
         assert res.converged
         assert np.all(np.abs((res.mean() - mu) / res.mcse()) < 2.58)
         assert abs(chi2_z(res, mu, P)) < 3.0
-    assert alone.pilot_steps == 0 and default.pilot_steps == MCMCSettings().pilot_steps
+    rounds = len(default.adapt_acceptance)
+    assert alone.pilot_steps == 0 and rounds >= 1
+    assert default.pilot_steps == MCMCSettings().pilot_steps + rounds * MCMCSettings().adapt_steps
     assert default.tau.max() < 6.0, default.tau  # a Gaussian fitted to the pilot is close to this target
 
 
@@ -201,27 +198,30 @@ class Interrupt(Exception):
     pass
 
 
-@pytest.mark.parametrize("where", ["pilot", "chain"])
+@pytest.mark.parametrize("where", ["pilot", "adapt0", "chain"])
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, where):
     """The log-density raises mid-run (a killed job); resuming from the HDF5 checkpoint finishes it.
 
-    Killed in the pilot chain (which fits the independence proposal) or in
-    the chain proper: the resumed chain, its diagnostics and the stopping
-    step equal those of a run that was never interrupted — the backend
-    carries emcee's random state, and the pilot's own group gives the same proposal.
+    Killed in the pilot chain (which fits the independence proposal), in its
+    first adaptation round or in the chain proper: the resumed chain, its
+    diagnostics and the stopping step equal those of a run that was never
+    interrupted — the backend carries emcee's random state, and the pilot's
+    and rounds' own groups give the same proposal.
     """
     mu, C, _, log_prob = correlated_gaussian(4, seed=4)
     settings = {"seed": 5, "progress": False, "check_every": 100, "min_tau_multiple": 20.0, "rhat_max": 1.05}
-    counted = {"n": 0}
+    counted = {"n": 0, "starts": []}
 
     def counting(X):
         counted["n"] += 1
+        if len(X) == 16:  # the whole ensemble: the first call of the pilot, of each round and of the chain
+            counted["starts"].append(counted["n"])
         return log_prob(X)
 
     whole = sample(counting, mu, C, MCMCSettings(backend=tmp_path / "whole.h5", **settings))
-    assert whole.pilot_steps == MCMCSettings().pilot_steps
-    # 1 (independence), 2 (DE) or 4 (snooker) calls per step: both points die off the check grid
-    kill_at = 400 if where == "pilot" else counted["n"] - 25
+    assert whole.pilot_steps == MCMCSettings().pilot_steps + len(whole.adapt_acceptance) * MCMCSettings().adapt_steps
+    # 1 (independence), 2 (DE) or 4 (snooker) calls per step: every point dies off the check grid
+    kill_at = {"pilot": 400, "adapt0": counted["starts"][1] + 25, "chain": counted["n"] - 25}[where]
     calls = {"n": 0}
 
     def flaky(X):
@@ -235,9 +235,9 @@ def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, wher
         sample(flaky, mu, C, MCMCSettings(backend=path, **settings))
     import emcee
 
-    group = "mcmc_pilot" if where == "pilot" else "mcmc"
+    group = "mcmc" if where == "chain" else f"mcmc_{where}"
     stopped = emcee.backends.HDFBackend(str(path), name=group, read_only=True).iteration
-    n_steps = whole.pilot_steps if where == "pilot" else whole.n_steps
+    n_steps = {"pilot": MCMCSettings().pilot_steps, "adapt0": MCMCSettings().adapt_steps}.get(where, whole.n_steps)
     assert 0 < stopped < n_steps and stopped % 100 != 0
     resumed = sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **settings))
     assert np.array_equal(resumed.chain, whole.chain)
