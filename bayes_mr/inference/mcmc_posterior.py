@@ -67,6 +67,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         "n_steps": result.n_steps, "n_walkers": result.n_walkers, "burn": result.burn, "thin": result.thin,
         "tau_max": float(np.max(result.tau)), "rhat_max": float(np.max(result.rhat)),
         "ess_min": float(np.min(result.ess)), "acceptance": float(np.mean(result.acceptance)),
+        "pilot_steps": result.pilot_steps, "adapt_acceptance": [float(a) for a in result.adapt_acceptance],
         "converged": bool(result.converged), "stopped": result.stopped, "seed_entropy": result.seed_entropy,
         "projection": result.projection,
     }
