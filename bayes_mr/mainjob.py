@@ -150,7 +150,12 @@ class Budget:
 #: does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The limit was 150 s until one BLAS thread (bayes_mr._threads) took the job from 16.1 to 10.1-11.0 min: with
 #: 150 s normalized-bouc-wen converged in one run (1500 steps, 135 s) and stopped at the limit in the next
-#: (1577 steps, R-hat 1.0109); with 180 s it converged at 1750 steps (168 s) and the job took 11.7 min.
+#: (1577 steps, R-hat 1.0109); with 180 s it converged at 1750 steps (168 s) and the job took 11.7 min. With the
+#: sampler's adaptation rounds (inference/mcmc.py) it converged at 1300 steps (136 s), lugre at 650 (6 s), dahl at
+#: 500 (10 s), and the job took 12.1 min; bouc-wen and spencer still stopped on their projection 150 steps into
+#: the chain proper (R-hat 1.18 and 1.30; pilot and rounds may spend half the 180 s). Run unbudgeted, spencer's τ
+#: keeps growing with the chain (26 steps after 800, R-hat 1.08) and bouc-wen's too (18 after 600, R-hat 1.09):
+#: neither converges in minutes on 2 cores, so the limit stays at 180 s and the headline says why.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None,
