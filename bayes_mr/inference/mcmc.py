@@ -99,7 +99,6 @@ from .moves import MOVES, NEEDS_PROPOSAL, fit_proposal, local_moves
 from .walkers import LogDensity, start_walkers
 
 
-
 @dataclass(frozen=True)
 class MCMCSettings:
     """Settings of an ensemble run.

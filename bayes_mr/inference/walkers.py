@@ -80,9 +80,23 @@ def initial_walkers(
         f"the starting point; check that it lies inside the prior box")
 
 
-def start_walkers(log_prob, x0_center, x0_cov, n_walkers, rng, initial, bounds=None) -> tuple[np.ndarray, np.ndarray]:
+def start_walkers(
+    log_prob: LogDensity,
+    x0_center: np.ndarray,
+    x0_cov: np.ndarray,
+    n_walkers: int,
+    rng: np.random.Generator,
+    initial: np.ndarray | None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Initial walker positions and their log-densities: ``initial`` checked, or drawn around the centre
-    (inside ``bounds``, :func:`initial_walkers`)."""
+    (inside ``bounds``, :func:`initial_walkers`).
+
+    Raises
+    ------
+    ValueError
+        If a walker of ``initial`` has no finite log-density.
+    """
     if initial is None:
         return initial_walkers(log_prob, x0_center, x0_cov, n_walkers, rng, bounds=bounds)
     coords = np.asarray(initial, float).copy()

@@ -98,6 +98,24 @@ def test_independence_move_alone_is_exact_with_a_wrong_proposal():
     assert default.tau.max() < 6.0, default.tau  # a Gaussian fitted to the pilot is close to this target
 
 
+def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow():
+    """A 12-d correlated target started from a cloud 1/20 of its spread: the 200-step DE pilot has not reached
+    the target's width, so its q is too narrow. Each round refits q to the walkers it moved: acceptance rises
+    from round to round, and the chain proper mixes faster than with the pilot's q frozen (measured over three
+    seeds: τ 4.7–4.9 against 6.3–7.6 steps, 500–600 steps to the rule against 750–950); both are exact."""
+    mu, C, P, log_prob = correlated_gaussian(12, seed=7)
+    adapted = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False))
+    frozen = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False, adapt_rounds=0))
+    acc = adapted.adapt_acceptance
+    assert len(acc) >= 2 and acc[-1] > acc[0], acc
+    assert frozen.adapt_acceptance == () and frozen.pilot_steps == MCMCSettings().pilot_steps
+    assert adapted.tau.max() < frozen.tau.max()
+    for res in (adapted, frozen):
+        assert res.converged
+        assert np.all(np.abs((res.mean() - mu) / res.mcse()) < 3.3)
+        assert abs(chi2_z(res, mu, P)) < 3.0
+
+
 def test_emcee_3_1_6_snooker_is_biased_and_ours_is_not():
     """emcee 3.1.6's DESnookerMove under-disperses (dfm/emcee#531); the package's corrected move does not.
 
