@@ -46,7 +46,8 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
     n_walkers : int
         Walkers of the ensemble (one step evaluates each once).
     pilot_steps : int
-        Steps of the pilot chain before the chain proper (0 if none).
+        Fewest steps before the chain proper: the pilot and one adaptation round
+        (``MCMCSettings.pilot_length``; 0 if none).
     max_seconds : float
         The chain's wall-time budget [s].
 
