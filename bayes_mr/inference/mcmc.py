@@ -189,7 +189,7 @@ class MCMCSettings:
     def make_moves(self, proposal: tuple | None = None) -> list:
         """Fresh emcee move objects (moves keep per-run state; never share them).
 
-        ``proposal`` is the (mean, cov[, edges[, df]]) of the moves that need one (the independence move).
+        ``proposal`` is the (mean, cov[, edges]) of the moves that need one (the independence move).
         """
         moves = []
         for name, w in self.moves:
@@ -238,7 +238,7 @@ def sample(
     group : str
         HDF5 group of the chain inside ``settings.backend`` (several chains
         can share one file, e.g. the temperatures of an evidence ladder).
-    proposal : (mean (d,), cov (d, d)[, edges[, df]]), optional
+    proposal : (mean (d,), cov (d, d)[, edges]), optional
         The independence move's fixed proposal (:class:`~.moves.Independence`; default: fitted to a pilot).
     bounds : (ndarray (d,), ndarray (d,)), optional
         The support's box: initial walkers are drawn inside it (:func:`~.walkers.initial_walkers`), and the pilot's
@@ -302,7 +302,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     initial : ndarray (n_walkers, d)
         The last walkers before the chain proper (where it starts).
     proposal : tuple
-        (mean, cov, edges, df) of :func:`~bayes_mr.inference.moves.fit_proposal`.
+        (mean, cov[, edges]) of :func:`~bayes_mr.inference.moves.fit_proposal`.
     pilot_steps : int
         Steps of the pilot and the rounds.
     acceptance : tuple of float

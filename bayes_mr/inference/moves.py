@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import emcee
 import numpy as np
-from scipy.special import gammaln
 
 
 class Snooker(emcee.moves.DESnookerMove):
@@ -71,7 +70,7 @@ class Independence(emcee.moves.MHMove):
     edges : (ndarray (d,), ndarray (d,), ndarray (d,) of int), optional
         (lower, upper, side): side −1 proposes ln(x − lower), +1 ln(upper − x), 0 x itself.
     df : float
-        Degrees of freedom ν (``inf``: a Gaussian q).
+        Degrees of freedom ν.
     """
 
     def __init__(self, mean, cov, edges=None, df: float = 4.0):
@@ -87,51 +86,14 @@ class Independence(emcee.moves.MHMove):
         x = np.atleast_2d(x)
         u, log_jac = to_edge_coords(x, self.edges)
         z = np.linalg.solve(self.chol, (u - self.mean).T)
-        return _t_kernel(np.sum(z * z, axis=0), self.df, self.mean.size) + log_jac
+        return -0.5 * (self.df + self.mean.size) * np.log1p(np.sum(z * z, axis=0) / self.df) + log_jac
 
     def _propose(self, x0, random):
         n, d = x0.shape
         z = random.randn(n, d) @ self.chol.T
-        w = np.sqrt(random.chisquare(self.df, n) / self.df) if np.isfinite(self.df) else np.ones(n)
+        w = np.sqrt(random.chisquare(self.df, n) / self.df)
         q = from_edge_coords(self.mean + z / w[:, None], self.edges)
         return q, self.log_density(x0) - self.log_density(q)
-
-
-def _t_kernel(delta2: np.ndarray, df: float, d: int) -> np.ndarray:
-    """ln of the multivariate t's kernel at squared Mahalanobis distance δ² (no constant); the Gaussian's at ν = ∞."""
-    if not np.isfinite(df):
-        return -0.5 * delta2
-    return -0.5 * (df + d) * np.log1p(delta2 / df)
-
-
-def _t_log_norm(df: float, d: int) -> float:
-    """ln of the multivariate t's normalising constant for a unit scale matrix (the Gaussian's at ν = ∞)."""
-    if not np.isfinite(df):
-        return -0.5 * d * np.log(2.0 * np.pi)
-    return float(gammaln(0.5 * (df + d)) - gammaln(0.5 * df) - 0.5 * d * np.log(df * np.pi))
-
-
-#: Degrees of freedom :func:`fit_proposal` chooses from. The t's tails keep p/q bounded where the target's
-#: are heavier than a Gaussian's; where they are not (a posterior cut off by the prior box), they waste proposals:
-#: on spencer's posterior on the packaged damper (14-d) the estimated acceptance of q fitted to the same draws was
-#: 0.20 at ν = 4, 0.26 at 10, 0.29 at 20 and 0.30 Gaussian (importance weights of 1000 proposals; scaling the
-#: t's matrix to the draws' covariance instead made ν = 4 worse, 0.16: the tails, not the width, cost).
-DF_GRID = (4.0, 8.0, 16.0, 32.0, np.inf)
-
-
-def fit_df(u: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
-    """ν of :data:`DF_GRID` under which the t(mean, cov) gives the draws u (n, d) the highest mean log-density.
-
-    The same criterion as the edge transform's (:func:`fit_proposal`): of the candidates, the q closest to the
-    draws' distribution in Kullback–Leibler divergence from it.
-    """
-    u = np.atleast_2d(u)
-    d = u.shape[1]
-    chol = jittered_cholesky(cov)
-    z = np.linalg.solve(chol, (u - mean).T)
-    delta2 = np.sum(z * z, axis=0)
-    fit = {df: _t_log_norm(df, d) + float(np.mean(_t_kernel(delta2, df, d))) for df in DF_GRID}
-    return max(fit, key=fit.get)
 
 
 def to_edge_coords(x: np.ndarray, edges) -> tuple[np.ndarray, np.ndarray]:
@@ -172,10 +134,7 @@ def _gaussian_fit(y: np.ndarray) -> float:
 
 
 def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
-    """(mean, cov, edges, df) of :class:`Independence` fitted to pilot draws x (n, d) within the box ``bounds``.
-
-    ``edges`` is None where no coordinate is transformed; ``df`` is chosen by :func:`fit_df` in the
-    proposal's coordinates.
+    """(mean, cov[, edges]) of :class:`Independence` fitted to pilot draws x (n, d) within the box ``bounds``.
 
     A coordinate whose pilot mean lies within :data:`EDGE_SDS` SDs of a bound
     is proposed in u = ln(distance to that bound) only where that fits the
@@ -193,8 +152,7 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
     """
     x = np.asarray(x, float)
     if bounds is None:
-        m, cov = x.mean(axis=0), np.cov(x, rowvar=False)
-        return m, cov, None, fit_df(x, m, cov)
+        return x.mean(axis=0), np.cov(x, rowvar=False)
     lower, upper = (np.asarray(b, float) for b in bounds)
     m, sd = x.mean(axis=0), x.std(axis=0)
     near_lo, near_hi = m - lower < EDGE_SDS * sd, upper - m < EDGE_SDS * sd
@@ -216,11 +174,9 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
         side[j] = near[j]
         best += gains[j]
     if not np.any(side):
-        cov = np.cov(x, rowvar=False)
-        return m, cov, None, fit_df(x, m, cov)
+        return m, np.cov(x, rowvar=False)
     u = np.where(side != 0, u_near, x)
-    m, cov = u.mean(axis=0), np.cov(u, rowvar=False)
-    return m, cov, (lower, upper, side), fit_df(u, m, cov)
+    return u.mean(axis=0), np.cov(u, rowvar=False), (lower, upper, side)
 
 
 #: Move names accepted in :attr:`MCMCSettings.moves`. ``emcee_snooker`` is emcee 3.1.6's biased
@@ -232,7 +188,7 @@ MOVES = {
     "emcee_snooker": emcee.moves.DESnookerMove,
     "independence": Independence,
 }
-#: Moves built from a fitted proposal (mean, cov[, edges[, df]]: :func:`fit_proposal`) rather than from nothing.
+#: Moves built from a fitted proposal (mean, cov[, edges]: :func:`fit_proposal`) rather than from nothing.
 NEEDS_PROPOSAL = ("independence",)
 
 

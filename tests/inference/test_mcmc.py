@@ -56,8 +56,7 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     assert np.all(np.abs(z) < 2.88), z
     assert np.all(res.rhat < 1.01), res.rhat
     assert abs(chi2_z(res, mu, P)) < 3.0
-    # a Gaussian q fitted to a Gaussian target is accepted often (0.68), DE and snooker moves less: never all
-    assert 0.15 < res.acceptance.mean() < 0.85
+    assert 0.15 < res.acceptance.mean() < 0.6
 
 
 def test_monte_carlo_errors_are_calibrated_over_seeds():
@@ -101,17 +100,16 @@ def test_independence_move_alone_is_exact_with_a_wrong_proposal():
 
 def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow():
     """A 12-d correlated target started from a cloud 1/20 of its spread: the 200-step DE pilot has not reached
-    the target's width, so its q is too narrow. A round refits q to the walkers it moved, and the chain proper
-    mixes faster than with the pilot's q frozen (measured over three seeds: τ 3.1–3.4 against 4.9–6.2 steps,
-    300–450 steps to the rule against 650–850; with the t₄ q of before the degrees of freedom were fitted, two
-    rounds, acceptance 0.36 → 0.42, τ 4.7–4.9 against 6.3–7.6); both are exact."""
+    the target's width, so its q is too narrow. Each round refits q to the walkers it moved: acceptance rises
+    from round to round, and the chain proper mixes faster than with the pilot's q frozen (measured over three
+    seeds: τ 4.7–4.9 against 6.3–7.6 steps, 500–600 steps to the rule against 750–950); both are exact."""
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
     adapted = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False))
     frozen = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False, adapt_rounds=0))
-    assert len(adapted.adapt_acceptance) >= 1
+    acc = adapted.adapt_acceptance
+    assert len(acc) >= 2 and acc[-1] > acc[0], acc
     assert frozen.adapt_acceptance == () and frozen.pilot_steps == MCMCSettings().pilot_steps
     assert adapted.tau.max() < frozen.tau.max()
-    assert adapted.acceptance.mean() > frozen.acceptance.mean()
     for res in (adapted, frozen):
         assert res.converged
         assert np.all(np.abs((res.mean() - mu) / res.mcse()) < 3.3)
@@ -420,32 +418,15 @@ def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
     piled_lo = rng.exponential(1.0, 4000)
     piled_hi = 10.0 - rng.exponential(0.5, 4000)
     out = fit_proposal(np.column_stack([gauss, piled_lo, piled_hi]), (lower, upper))
-    assert list(out[2][2]) == [0, -1, 1]
-    assert fit_proposal(gauss[:, None], (lower[:1], upper[:1]))[2] is None  # nothing moved: the plain fit
+    assert len(out) == 3 and list(out[2][2]) == [0, -1, 1]
+    assert len(fit_proposal(gauss[:, None], (lower[:1], upper[:1]))) == 2  # nothing moved: the plain fit
 
     half = rng.exponential(1.0, 4000)  # piled against 0
     along = 2.0 * half + 0.2 * rng.standard_normal(4000)
     assert np.corrcoef(half, along)[0, 1] > 0.98
     box = (np.array([0.0, -30.0]), np.array([10.0, 30.0]))
-    assert fit_proposal(np.column_stack([half, along]), box)[2] is None
+    assert len(fit_proposal(np.column_stack([half, along]), box)) == 2
     assert list(fit_proposal(half[:, None], (box[0][:1], box[1][:1]))[2][2]) == [-1]
-
-
-def test_the_proposal_takes_the_tails_of_its_draws():
-    """fit_df picks, of DF_GRID, the t closest to the draws: Gaussian draws get the Gaussian (ν = ∞), draws of a
-    t with 4 degrees of freedom a t with ν ≤ 8, and draws cut off by a box (lighter tails than a Gaussian's)
-    the Gaussian."""
-    from bayes_mr.inference.moves import fit_df
-
-    rng = np.random.default_rng(0)
-    C = np.array([[1.0, 0.6, 0.0], [0.6, 2.0, 0.3], [0.0, 0.3, 0.5]])
-    L = np.linalg.cholesky(C)
-    gauss = rng.standard_normal((4000, 3)) @ L.T
-    heavy = gauss / np.sqrt(rng.chisquare(4.0, 4000) / 4.0)[:, None]
-    boxed = rng.uniform(-1.0, 1.0, (4000, 3)) @ L.T
-    for x, ok in ((gauss, lambda df: df == np.inf), (heavy, lambda df: df <= 8.0), (boxed, lambda df: df == np.inf)):
-        df = fit_df(x, x.mean(axis=0), np.cov(x, rowvar=False))
-        assert ok(df), df
 
 
 def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stays_exact():
@@ -465,7 +446,7 @@ def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stay
     rng = np.random.default_rng(0)
     x0 = rng.exponential(1.0, 4000)
     draws = np.column_stack([x0, 0.5 * x0 + rng.standard_normal(4000)])
-    m_u, cov_u, edges, _ = fit_proposal(draws, (lower, upper))
+    m_u, cov_u, edges = fit_proposal(draws, (lower, upper))
     assert list(edges[2]) == [-1, 0]
     off = (m_u + np.array([0.3, -0.3]), cov_u * 1.6)
     alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, edges),
