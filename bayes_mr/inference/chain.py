@@ -67,7 +67,7 @@ class MCMCResult:
     names: tuple[str, ...] = ()
     history: list = field(default_factory=list)
     pilot_steps: int = 0
-    adapt_acceptance: tuple = ()
+    adapt_acceptance: tuple[float, ...] = ()
     projection: dict | None = None
 
     @property

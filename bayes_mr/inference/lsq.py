@@ -164,8 +164,6 @@ class LSQResult:
 # --- nonlinear least squares -----------------------------------------------------------
 
 
-
-
 def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
     """The likelihood's local peak reached downhill from ``phi0`` (bounded trust-region least squares).
 
