@@ -31,6 +31,7 @@ from ._specialise import kernel
 from .inputs import COMMANDS, DRIVE, Inputs
 from .models import Model, get_model
 from .models.drivers import run_batch
+from .synthetic_noise import as_seed_sequence
 
 #: Output channels of a simulation, by kind of test.
 OUTPUT_NAMES = {
@@ -223,7 +224,7 @@ def synthesize(
         m = float(np.asarray(theta, float)[model.param_names(kind).index("m")])
         if not np.isclose(m, mass, rtol=1e-12):
             raise ValueError(f"mass {mass} kg differs from the parameter m = {m} kg")
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seq = as_seed_sequence(seed)
     time = np.asarray(time, float)
     dt = float(time[1] - time[0])
     noisy = _noise_adder(noise, 1.0 / dt, np.random.default_rng(seq), band)

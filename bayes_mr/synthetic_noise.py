@@ -23,6 +23,15 @@ BUTTER_ORDER = 4
 RngLike = np.random.Generator | np.random.SeedSequence | int
 
 
+def as_seed_sequence(seed: np.random.SeedSequence | int | None) -> np.random.SeedSequence:
+    """``seed`` as a :class:`numpy.random.SeedSequence` (itself if it is one).
+
+    ``None`` draws fresh entropy from the operating system: the callers that
+    allow it record ``.entropy`` with their result, so the draw can be repeated.
+    """
+    return seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+
+
 def as_generator(rng: RngLike) -> np.random.Generator:
     """A :class:`numpy.random.Generator` from a Generator, a SeedSequence or an int seed.
 

@@ -17,6 +17,8 @@ from pathlib import Path
 import emcee
 import numpy as np
 
+from ..synthetic_noise import as_seed_sequence
+
 
 def run_seeds(seed) -> tuple[np.random.Generator, dict, str]:
     """The Generator of the initial walkers, emcee's RandomState state, and the seed's entropy.
@@ -36,7 +38,7 @@ def run_seeds(seed) -> tuple[np.random.Generator, dict, str]:
         The seed's entropy, with the spawn key of a spawned child (a child
         shares its parent's entropy: the spawn key tells them apart).
     """
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seq = as_seed_sequence(seed)
     init_seq, move_seq = seq.spawn(2)
     rs = np.random.RandomState(np.random.MT19937(move_seq))
     entropy = str(seq.entropy) + ("/" + "-".join(map(str, seq.spawn_key)) if seq.spawn_key else "")

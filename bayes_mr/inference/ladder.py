@@ -38,6 +38,7 @@ import numpy as np
 
 from ..executor import run_jobs, share
 from ..stats import integrated_times
+from ..synthetic_noise import as_seed_sequence
 from .mcmc import MCMCResult, MCMCSettings, sample
 from .moves import local_moves
 
@@ -294,7 +295,7 @@ def run_ladder(
     betas = default_ladder(path) if betas is None else np.asarray(betas, float)
     if not (betas[0] == 0 and betas[-1] == 1 and np.all(np.diff(betas) > 0)):
         raise ValueError("the ladder must rise strictly from 0 to 1")
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seq = as_seed_sequence(seed)
     ref_seq, exact_seq, *temp_seqs = seq.spawn(2 + betas.size)
     reference, post, lp_post = _top_rung(target, posterior, path, ref_seq)
     extra, extra_var = 0.0, (reference.log_mass_error**2 if reference is not None else 0.0)

@@ -92,6 +92,7 @@ from pathlib import Path
 import emcee
 import numpy as np
 
+from ..synthetic_noise import as_seed_sequence
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged
@@ -346,7 +347,7 @@ def _second_half(res: MCMCResult) -> np.ndarray:
 
 def _child(seed, key: int) -> np.random.SeedSequence:
     """The child of ``seed`` with spawn key ``key`` appended (not one ``SeedSequence.spawn`` gives)."""
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    seq = as_seed_sequence(seed)
     return np.random.SeedSequence(seq.entropy, spawn_key=seq.spawn_key + (key,))
 
 

@@ -73,6 +73,7 @@ import xarray as xr
 from ..executor import cancel, is_done, share
 from ..likelihood import OutputError, channel_noise
 from ..progress import bar as progress_bar
+from ..synthetic_noise import as_seed_sequence
 from . import ukf
 from . import ukf_kernel as K
 from .ukf import TAUS, Prior, Problem, UKFSettings
@@ -260,7 +261,7 @@ def train(
     """
     t_start = _time.perf_counter()
     problem = ukf.make_problem(lik, settings=settings)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = as_seed_sequence(seed)
     priors = ukf.lhs_priors(problem.coords, n_lhs, taus, seed=np.random.default_rng(ss))
     n_runs = len(priors)
     chunk = int(chunk_size) if chunk_size is not None else _default_chunk(n_runs, executor)

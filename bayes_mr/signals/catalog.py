@@ -14,7 +14,7 @@ from functools import partial
 
 import numpy as np
 
-from ..synthetic_noise import as_generator
+from ..synthetic_noise import as_generator, as_seed_sequence
 from .earthquake import BASELINES, earthquake
 from .signal import Signal
 from .thesis import amp_sweep, blwn, freq_sweep_up, freq_sweep_up_down, step
@@ -62,7 +62,7 @@ def _generator(req: _Request, params: dict) -> np.random.Generator:
     if req.rng is not None:
         params["seed"] = "caller's numpy Generator"
         return as_generator(req.rng)
-    seq = req.seed if isinstance(req.seed, np.random.SeedSequence) else np.random.SeedSequence(req.seed)
+    seq = as_seed_sequence(req.seed)
     params["seed"] = seq.entropy  # reproduces the draw: make_signal(..., seed=this)
     if seq.spawn_key:  # a spawned child needs its key too
         params["seed_spawn_key"] = list(seq.spawn_key)
