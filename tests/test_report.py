@@ -133,7 +133,8 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
                  "converged": False, "stopped": "projected",
                  "projection": {"tau_max": 25.0, "steps_needed": 1375, "seconds_needed": 412.4, "budget_s": 90.0}}
     chains, = _posterior_lines([projected], "spencer", {})
-    assert ("spencer (stopped when its integrated time (25 steps) projected the rule to ~1375 steps, ~412 s "
+    assert ("spencer (stopped when its integrated time (25 steps, a lower bound from a chain this short) projected "
+            "the rule to at least ~1375 steps, ~412 s "
             "against the 90 s left: 300 steps = 12 τ, R-hat 1.7000) NOT converged") in chains
     # a chain just over the rule reads as over it (1.0109 is not "1.01"), and a long one in whole τ
     timed_out = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_seconds", projection=None)

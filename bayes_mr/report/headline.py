@@ -157,11 +157,15 @@ STOP_REASONS = {"max_steps": "step limit", "max_seconds": "time limit", "project
 
 
 def _stop_reason(row: dict) -> str:
-    """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need."""
+    """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need at
+    least: τ estimated from a chain shorter than 50 τ is biased low (emcee's own caution), and on the packaged
+    damper it kept growing with the chain (convergence.projection), so the projection is a floor, not a
+    near miss."""
     p = row.get("projection")
     if row.get("stopped") == "projected" and p:
-        return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps) projected the rule to "
-                f"~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s against the {p['budget_s']:.0f} s left")
+        return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps, a lower bound from a chain this "
+                f"short) projected the rule to at least ~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s "
+                f"against the {p['budget_s']:.0f} s left")
     return STOP_REASONS.get(row.get("stopped"), "budget")
 
 
