@@ -61,6 +61,16 @@ class Independence(emcee.moves.MHMove):
     instead, with the Jacobian in q, so its proposals stay inside the box and
     follow the skew (:func:`fit_proposal` decides which, if any).
 
+    Given the box (``edges``), proposals are drawn from q *restricted to it*:
+    a draw outside is drawn again (up to :data:`REDRAWS` times). The
+    restricted density is q times a constant on the box, and the constant
+    cancels from the Hastings ratio, so the chain stays exact; a draw outside
+    the prior's box is one the target rejects anyway, so this spends no
+    likelihood evaluation on it. Measured on the packaged damper's posteriors
+    (importance weights of 1500 proposals against the chain's own draws):
+    normalized-bouc-wen's fitted t put 20 % of its draws outside the box,
+    spencer's 25 %.
+
     Parameters
     ----------
     mean : ndarray (d,)
@@ -68,7 +78,8 @@ class Independence(emcee.moves.MHMove):
     cov : ndarray (d, d)
         Scale matrix Σ of the t, same coordinates.
     edges : (ndarray (d,), ndarray (d,), ndarray (d,) of int), optional
-        (lower, upper, side): side −1 proposes ln(x − lower), +1 ln(upper − x), 0 x itself.
+        (lower, upper, side): the target's support box, and per coordinate side −1 proposes
+        ln(x − lower), +1 ln(upper − x), 0 x itself.
     df : float
         Degrees of freedom ν.
     """
@@ -78,6 +89,7 @@ class Independence(emcee.moves.MHMove):
         d = self.mean.size
         self.chol = jittered_cholesky(cov)
         self.df = float(df)
+        self.box = None if edges is None else (np.asarray(edges[0], float), np.asarray(edges[1], float))
         self.edges = None if edges is None or not np.any(edges[2]) else tuple(np.asarray(e) for e in edges)
         super().__init__(self._propose, ndim=d)
 
@@ -88,12 +100,28 @@ class Independence(emcee.moves.MHMove):
         z = np.linalg.solve(self.chol, (u - self.mean).T)
         return -0.5 * (self.df + self.mean.size) * np.log1p(np.sum(z * z, axis=0) / self.df) + log_jac
 
-    def _propose(self, x0, random):
-        n, d = x0.shape
-        z = random.randn(n, d) @ self.chol.T
+    def _draw(self, n: int, random) -> np.ndarray:
+        """n draws of q (target coordinates)."""
+        z = random.randn(n, self.mean.size) @ self.chol.T
         w = np.sqrt(random.chisquare(self.df, n) / self.df)
-        q = from_edge_coords(self.mean + z / w[:, None], self.edges)
+        return from_edge_coords(self.mean + z / w[:, None], self.edges)
+
+    def _propose(self, x0, random):
+        q = self._draw(x0.shape[0], random)
+        if self.box is not None:
+            lower, upper = self.box
+            out = ~np.all((q >= lower) & (q <= upper), axis=1)
+            for _ in range(REDRAWS):
+                if not out.any():
+                    break
+                q[out] = self._draw(int(out.sum()), random)
+                out[out] = ~np.all((q[out] >= lower) & (q[out] <= upper), axis=1)
         return q, self.log_density(x0) - self.log_density(q)
+
+
+#: Times :class:`Independence` draws again a proposal that fell outside the box before leaving it to be
+#: rejected: at an in-box share of 1 %, 20 rounds still place a fifth of the proposals.
+REDRAWS = 20
 
 
 def to_edge_coords(x: np.ndarray, edges) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +162,8 @@ def _gaussian_fit(y: np.ndarray) -> float:
 
 
 def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
-    """(mean, cov[, edges]) of :class:`Independence` fitted to pilot draws x (n, d) within the box ``bounds``.
+    """(mean, cov[, edges]) of :class:`Independence` fitted to pilot draws x (n, d) within the box ``bounds``
+    (``edges`` whenever ``bounds`` is given: the box, and the coordinates proposed in log-distance to it).
 
     A coordinate whose pilot mean lies within :data:`EDGE_SDS` SDs of a bound
     is proposed in u = ln(distance to that bound) only where that fits the
@@ -174,7 +203,7 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
         side[j] = near[j]
         best += gains[j]
     if not np.any(side):
-        return m, np.cov(x, rowvar=False)
+        return m, np.cov(x, rowvar=False), (lower, upper, side)
     u = np.where(side != 0, u_near, x)
     return u.mean(axis=0), np.cov(u, rowvar=False), (lower, upper, side)
 
