@@ -155,7 +155,11 @@ class Budget:
 #: 500 (10 s), and the job took 12.1 min; bouc-wen and spencer still stopped on their projection 150 steps into
 #: the chain proper (R-hat 1.18 and 1.30; pilot and rounds may spend half the 180 s). Run unbudgeted, spencer's τ
 #: keeps growing with the chain (26 steps after 800, R-hat 1.08) and bouc-wen's too (18 after 600, R-hat 1.09):
-#: neither converges in minutes on 2 cores, so the limit stays at 180 s and the headline says why.
+#: neither converges in minutes on 2 cores, so the limit stays at 180 s and the headline says why. With the
+#: independence proposals drawn inside the box (inference/moves.py) normalized-bouc-wen converged at 850 steps
+#: (112 s) and the job took 11.5 min; spencer's acceptance rose 0.155 -> 0.219, but unbudgeted it still had
+#: R-hat 1.033 after 1200 steps (τ 25); before that change, 30 walkers instead of 56 made its pilot mix
+#: worse (acceptance 0.06, R-hat 1.21 after 2000 steps).
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None,
