@@ -105,16 +105,20 @@ class Independence(emcee.moves.MHMove):
         w = np.sqrt(random.chisquare(self.df, n) / self.df)
         return from_edge_coords(self.mean + z / w[:, None], self.edges)
 
+    def _outside(self, q: np.ndarray) -> np.ndarray:
+        """Indices of the rows of q outside the box."""
+        lower, upper = self.box
+        return np.flatnonzero(~np.all((q >= lower) & (q <= upper), axis=1))
+
     def _propose(self, x0, random):
         q = self._draw(x0.shape[0], random)
         if self.box is not None:
-            lower, upper = self.box
-            out = ~np.all((q >= lower) & (q <= upper), axis=1)
+            out = self._outside(q)
             for _ in range(REDRAWS):
-                if not out.any():
+                if out.size == 0:
                     break
-                q[out] = self._draw(int(out.sum()), random)
-                out[out] = ~np.all((q[out] >= lower) & (q[out] <= upper), axis=1)
+                q[out] = self._draw(out.size, random)
+                out = out[self._outside(q[out])]
         return q, self.log_density(x0) - self.log_density(q)
 
 
@@ -201,9 +205,7 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
         j = max(gains, key=gains.get)
         side[j] = near[j]
         best += gains[j]
-    if not np.any(side):
-        return m, np.cov(x, rowvar=False), (lower, upper, side)
-    u = np.where(side != 0, u_near, x)
+    u = np.where(side != 0, u_near, x)  # x itself where no coordinate moved
     return u.mean(axis=0), np.cov(u, rowvar=False), (lower, upper, side)
 
 
