@@ -81,16 +81,15 @@ INLINED_WORK = 2e7
 #: sigma-point arithmetic gains from inlining only with the sizes constant (:data:`INLINE`).
 INLINED_TIER = ("run_batch",)
 
-#: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics).
-#: The constant layout alone (nothing inlined) measured 1.3x on the dahl structure step; inlining these
-#: too, 1.5-2.4x in all (dahl 182 -> 76 ns per sample; bench ``simulate_ns_per_step``). ``advance`` calls
-#: ``deriv`` from one site for all four RK4 stages, so it is inlined once, not four times: the same speed
-#: at a fifth of the compile time (dahl structure simulator, measured: ~220 s -> 47 s). The UKF's sigma-point
-#: arithmetic (:mod:`bayes_mr.inference.unscented_kernel`) is inlined too, so that the filter's sizes, which its
-#: layout carries (``ukf_kernel.ukf_layout``), are constants in every loop of the step: one dahl filter run on
-#: signal I measured 2.27 µs per sample with the physics alone inlined, 1.98 with the sizes constant in the
-#: filter loop, 1.68–1.82 with these inlined as well (one thread; the simulator does not reach them).
-INLINE = ("deriv", "rate", "substeps", "advance", "observe", "cholesky", "sigma_points", "moments", "sigma_thetas")
+#: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics). The
+#: constant layout alone measured 1.3x on the dahl structure step, inlining these too 1.5-2.4x (dahl 182 -> 76 ns).
+#: ``advance`` calls ``deriv`` from one site for all four RK4 stages, so it is inlined once: the same speed at a
+#: fifth of the compile time (~220 s -> 47 s). The UKF's sigma-point arithmetic (:mod:`.inference.unscented_kernel`)
+#: is inlined so the filter's sizes (``ukf_kernel.ukf_layout``) are constants in its loops: a dahl filter run on
+#: signal I 2.27 -> 1.68–1.82 µs per sample. ``_integrate`` is inlined into ``models.drivers.run_one``, whose one
+#: scratch array then keeps RK4's stages in registers (dahl 31.8 -> 25.7 ns); the same for the UKF: no gain.
+INLINE = ("_integrate", "deriv", "rate", "substeps", "advance", "observe", "cholesky", "sigma_points", "moments",
+          "sigma_thetas")
 
 _loaded: dict[tuple, object] = {}
 _lock = threading.RLock()
