@@ -1,40 +1,31 @@
 """Compiled kernels specialised to one model layout, cached on disk.
 
-The generic kernels (:mod:`bayes_mr.models.kernel`, the drivers, the UKF)
-read the model's int64 *layout* at run time, so one compiled kernel serves
-every ``FORM+EFFECT`` combination but branches on the layout at every
-sub-step. :func:`specialised` returns the same kernel with the layout fixed:
-a generated module (one per layout and kernel) holds the layout as a global
-tuple and a wrapper that passes it on to the generic kernel. numba types a
-global tuple of ints as a tuple of *literal* ints, and every compiled
-function it reaches is compiled again for that literal type — the layout
-becomes a compile-time constant there, and LLVM folds away the branches of
-the effects the model does not have. The physics stays in one place: a new
-effect added to the generic kernel is specialised with no change here.
+The generic kernels (:mod:`bayes_mr.models.kernel`, the drivers, the UKF) read the model's int64 *layout* at
+run time, so one compiled kernel serves every ``FORM+EFFECT`` combination but branches on the layout at every
+sub-step. :func:`specialised` returns the same kernel with the layout fixed: a generated module (one per
+layout and kernel) holds the layout as a global tuple and a wrapper that passes it on to the generic kernel.
+numba types a global tuple of ints as a tuple of *literal* ints, and every compiled function it reaches is
+compiled again for that literal type — the layout becomes a compile-time constant there, and LLVM folds away
+the branches of the effects the model does not have. The physics stays in one place: a new effect added to
+the generic kernel is specialised with no change here.
 
-Compiling one takes about a minute (50–110 s measured), so ``auto`` never waits for it:
-it starts the compile in a child process (:mod:`bayes_mr._compile_worker`)
-and runs the generic kernel until the child marks the machine code ready
+Compiling one takes about a minute, so ``auto`` never waits for it: it starts the compile in a child process
+(:mod:`bayes_mr._compile_worker`) and runs the generic kernel until the child marks the machine code ready
 on disk (:class:`_Auto`).
 
-Between the two sits the *inlined* kernel (:func:`inlined`): the generic
-kernel with the per-sub-step physics inlined (:data:`INLINE`) but the layout
-still read at run time. One compile serves every model, so ``auto`` starts
-it much sooner (:data:`INLINED_WORK`) and runs it until a model's
-specialised kernel is ready. The generic kernel itself stays as it is: the
-reference the others are tested against, and quick to compile for the test
-suite.
+Between the two sits the *inlined* kernel (:func:`inlined`): the generic kernel with the per-sub-step
+physics inlined (:data:`INLINE`) but the layout still read at run time. One compile serves every model, so
+``auto`` starts it much sooner (:data:`INLINED_WORK`) and runs it until a model's specialised kernel is
+ready. The generic kernel itself stays as it is: the reference the others are tested against, and quick to
+compile for the test suite.
 
-Cache. The generated modules live in ``$BAYES_MR_CACHE/kernels`` (default
-``~/.cache/bayes_mr/kernels``); numba caches their machine code next to
-them (``__pycache__``), so a fresh machine compiles each model once and a
-later process loads it from disk. A module's name hashes the layout, the
-kernel and the source of every module the kernel reaches, so editing the
-physics gives new modules instead of stale machine code (numba itself only
-checks the caller's file). Files are written to a temporary name and
-renamed, so concurrent processes (pytest workers, Dask) never see a partial
-file; two processes compiling the same kernel at once both succeed, and
-numba's own index writes are atomic too.
+Cache. The generated modules live in ``$BAYES_MR_CACHE/kernels`` (default ``~/.cache/bayes_mr/kernels``);
+numba caches their machine code next to them (``__pycache__``), so a fresh machine compiles each model once
+and a later process loads it from disk. A module's name hashes the layout, the kernel and the source of
+every module the kernel reaches, so editing the physics gives new modules instead of stale machine code
+(numba itself only checks the caller's file). Files are written to a temporary name and renamed, so
+concurrent processes (pytest workers, Dask) never see a partial file; two processes compiling the same
+kernel at once both succeed, and numba's own index writes are atomic too.
 """
 
 from __future__ import annotations
@@ -61,35 +52,32 @@ from numba.core.typing.typeof import Purpose
 CACHE_ENV = "BAYES_MR_CACHE"
 #: Environment variable choosing the kernels: ``auto`` (default), ``specialised`` or ``generic``.
 KERNELS_ENV = "BAYES_MR_KERNELS"
-#: ``auto``: a background compile of a layout's specialised kernel starts once this many sample-steps
-#: (samples × parameter sets) have been asked of it in the process; a kernel already compiled on disk
-#: for the call's argument types runs at once. A cold compile costs about a minute of one core per model
-#: and kernel (the simulator, structure test: dahl 53 s, normalized-bouc-wen 107 s; before RK4's four
-#: stages shared one inlined right-hand side, 1–3.5 min) and saves ~110 ns per dahl sample-step (182 → 76
-#: ns). It pays back within one process after ~5e8 steps (a minute / 110 ns) and at once in every later
-#: process (the disk cache), so it starts at 2e8 steps asked of one layout — an emcee posterior or a
-#: 100-prior UKF training, not a least-squares fit or one of diagnose's dozens of candidate refits (on 2
-#: cores the compile takes a core from them).
+#: ``auto``: a background compile of a layout's specialised kernel starts once this many sample-steps (samples ×
+#: parameter sets) have been asked of it in the process; one already compiled on disk for the call's argument types
+#: runs at once. A cold compile costs about a minute of one core per model and kernel (bench ``compile_s``) and saved
+#: ~110 ns per dahl sample-step (182 → 76 ns): it pays back in one process after ~5e8 steps and at once in later ones
+#: (the disk cache), so it starts at 2e8 — an emcee posterior or a 100-prior UKF training, not a least-squares fit
+#: or one of diagnose's dozens of candidate refits (on 2 cores the compile takes a core from them).
 AUTO_WORK = 2e8
-#: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this
-#: many sample-steps have been asked of the generic kernel in the process, over all layouts. It costs ~40 s of
-#: one core (the simulator) once per machine and halves the generic step (dahl structure 126 -> 60 ns,
-#: normalized-bouc-wen 221 -> 159 ns, measured): a diagnose or a few least-squares fits of a long record pay.
+#: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this many
+#: sample-steps have been asked of the generic kernel in the process, over all layouts. ~40 s of one core once per
+#: machine, it halves the generic step (dahl 126 -> 60 ns): a diagnose or a few fits of a long record pay.
 INLINED_WORK = 2e7
 #: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to
 #: pay for any compile or long enough for its model's specialised kernel (``AUTO_WORK``), and the filter's
 #: sigma-point arithmetic gains from inlining only with the sizes constant (:data:`INLINE`).
 INLINED_TIER = ("run_batch",)
 
-#: Compiled functions inlined into their callers in the specialised kernels (the per-sub-step physics). The
-#: constant layout alone measured 1.3x on the dahl structure step, inlining these too 1.5-2.4x (dahl 182 -> 76 ns).
-#: ``advance`` calls ``deriv`` from one site for all four RK4 stages, so it is inlined once: the same speed at a
-#: fifth of the compile time (~220 s -> 47 s). The UKF's sigma-point arithmetic (:mod:`.inference.unscented_kernel`)
-#: is inlined so the filter's sizes (``ukf_kernel.ukf_layout``) are constants in its loops: a dahl filter run on
-#: signal I 2.27 -> 1.68–1.82 µs per sample. ``_integrate`` is inlined into ``models.drivers.run_one``, whose one
-#: scratch array then keeps RK4's stages in registers (dahl 31.8 -> 25.7 ns); the same for the UKF: no gain.
-INLINE = ("_integrate", "deriv", "rate", "substeps", "advance", "observe", "cholesky", "sigma_points", "moments",
-          "sigma_thetas")
+#: Compiled functions inlined into their callers in the specialised and inlined kernels (the per-sub-step physics):
+#: 1.5-2.4x on the dahl structure step with the layout constant (1.3x without). ``advance`` calls ``deriv`` from one
+#: site for all four RK4 stages, so it is inlined once (a fifth of the compile time, ~220 s -> 47 s). The UKF's
+#: sigma-point arithmetic (:mod:`.inference.unscented_kernel`) is inlined so the filter's sizes are constants in its
+#: loops (a dahl filter run on signal I 2.27 -> 1.68–1.82 µs per sample).
+INLINE = ("deriv", "rate", "substeps", "advance", "observe", "cholesky", "sigma_points", "moments", "sigma_thetas")
+#: Inlined as well in a kernel specialised to one layout: the simulator's loop, into ``models.drivers.run_one``,
+#: whose one scratch array then keeps RK4's stages in registers (dahl structure step 31.8 -> 25.4 ns; in the
+#: inlined kernel, layout unknown, 47 -> 249 ns, so not there). The UKF's loop the same way: no gain.
+INLINE_SPECIALISED = ("_integrate",)
 
 _loaded: dict[tuple, object] = {}
 _lock = threading.RLock()
@@ -223,9 +211,17 @@ def _lay_tuple(lay) -> tuple[int, ...] | None:
     return None if lay is None else tuple(int(v) for v in np.asarray(lay).ravel())
 
 
-def module_path(dispatcher, lay, inline: tuple[str, ...] = INLINE) -> Path:
+def _inline_for(lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | None) -> tuple[str, ...]:
+    """``inline``, or by default :data:`INLINE` (the inlined kernel) and :data:`INLINE_SPECIALISED` too (one layout)."""
+    if inline is not None:
+        return tuple(inline)
+    return INLINE if lay_t is None else INLINE + INLINE_SPECIALISED
+
+
+def module_path(dispatcher, lay, inline: tuple[str, ...] | None = None) -> Path:
     """Path of the generated module specialising ``dispatcher`` to layout ``lay`` (None: the inlined kernel)."""
     lay_t = _lay_tuple(lay)
+    inline = _inline_for(lay_t, inline)
     text = _source(dispatcher, lay_t, inline)
     key = hashlib.sha256((_fingerprint(dispatcher) + text).encode()).hexdigest()[:20]
     return cache_dir() / f"k_{dispatcher.py_func.__name__}_{'any_' if lay_t is None else ''}{key}.py"
@@ -243,8 +239,9 @@ def _load(path: Path):
     return mod
 
 
-def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] = INLINE) -> Path:
+def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | None = None) -> Path:
     """:func:`module_path`, memoised (hashing the kernel's sources reads files)."""
+    inline = _inline_for(lay_t, inline)
     key = (id(dispatcher), lay_t, inline)
     with _lock:
         path = _paths.get(key)
@@ -253,15 +250,16 @@ def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] = I
     return path
 
 
-def _generated(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] = INLINE) -> Path:
+def _generated(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | None = None) -> Path:
     """Path of the generated module, written if missing."""
+    inline = _inline_for(lay_t, inline)
     path = _path(dispatcher, lay_t, inline)
     if not path.exists():
         _write_atomic(path, _source(dispatcher, lay_t, inline))
     return path
 
 
-def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
+def specialised(dispatcher, lay, inline: tuple[str, ...] | None = None):
     """``dispatcher`` (a compiled kernel whose first argument is the layout) with ``lay`` fixed.
 
     Parameters
@@ -272,7 +270,8 @@ def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
         The model's layout (:meth:`bayes_mr.models.Model.layout`).
     inline : tuple of str
         Names of the compiled functions inlined into their callers (default
-        :data:`INLINE`; fewer compile faster and run slower).
+        :data:`INLINE` and :data:`INLINE_SPECIALISED`, or :data:`INLINE` alone when ``lay`` is None; fewer
+        compile faster and run slower).
 
     Returns
     -------
@@ -281,7 +280,7 @@ def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
         compiles on its first call (or loads its machine code from the cache).
     """
     lay_t = _lay_tuple(lay)
-    inline = tuple(inline)
+    inline = _inline_for(lay_t, inline)
     key = (id(dispatcher), lay_t, inline)
     fn = _loaded.get(key)
     if fn is None:
@@ -291,7 +290,7 @@ def specialised(dispatcher, lay, inline: tuple[str, ...] = INLINE):
     return fn
 
 
-def inlined(dispatcher, inline: tuple[str, ...] = INLINE):
+def inlined(dispatcher, inline: tuple[str, ...] | None = None):
     """``dispatcher`` with the functions named in ``inline`` inlined, the layout still an argument.
 
     The same physics as the generic kernel (the same numbers; tested), about

@@ -47,7 +47,7 @@ def _inputs(kind: str) -> Inputs:
     return _forced_inputs()
 
 
-def _both(name: str, kind: str, inline=S.INLINE, driver=run_batch, any_layout: bool = False):
+def _both(name: str, kind: str, inline=None, driver=run_batch, any_layout: bool = False):
     """Outputs and schedules of the generic and of the specialised (``any_layout``: the inlined) kernel on the
     same inputs."""
     m = get_model(name)
