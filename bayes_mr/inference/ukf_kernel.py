@@ -26,7 +26,7 @@ from numba import prange
 
 from .._jit import driver, hot
 from ..models.integrate import DECIDE, advance, substeps, work_shape
-from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, channel, deriv, rate
+from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, channel, deriv, forces, rate
 from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
 
 # status codes of a run
@@ -59,7 +59,7 @@ def ukf_layout(lay: np.ndarray, L: int, ny: int) -> np.ndarray:
 @hot
 def observe(lay, cst, th, t, a, s, ds, y, ny):
     """The ny measured channels predicted from state s: those the layout's L_OBS slots name, in order."""
-    f_r, f_d = deriv(lay, cst, th, t, a, s, ds)
+    f_r, f_d = forces(lay, cst, th, t, a, s, ds)
     for q in range(ny):
         y[q] = channel(lay, cst, th, a, s, f_r, lay[L_OBS + q])
 

@@ -144,6 +144,23 @@ def deriv(lay, cst, p, t, a, s, ds):
         Damper force [N] (the hysteretic part of f_r, with preload and
         voltage-dependent viscous term when those effects are on).
     """
+    return _state_rates(lay, cst, p, t, a, s, ds, True)
+
+
+@hot
+def forces(lay, cst, p, t, a, s, ds):
+    """The forces (f_r, f_d) [N] of :func:`deriv` without the hysteretic state's rate; ``ds`` is scratch.
+
+    The output map of a filter's measurement update: the power |z|ⁿ of the
+    Bouc–Wen family's ż is most of a right-hand side's cost and no force
+    needs it (LuGre's force holds ε ż, so there it is computed).
+    """
+    return _state_rates(lay, cst, p, t, a, s, ds, False)
+
+
+@hot(inline="always")
+def _state_rates(lay, cst, p, t, a, s, ds, rates):
+    """:func:`deriv` (``rates`` True) or :func:`forces` (False; ``ds``'s hysteretic entries left unset)."""
     form = lay[L_FORM]
     kind = lay[L_KIND]
     if kind != DEVICE:
@@ -202,9 +219,10 @@ def deriv(lay, cst, p, t, a, s, ds):
         ds[i + 2] = _lag_rate(lay, p, eta, v, us)
         yd = (alpha * z * (1.0 + asym * _sgn(z)) + c0 * xd + k0 * (x - y)) / (c0 + c1)
         r = xd - yd
-        zn = math.pow(abs(z), n)
         ds[i] = yd
-        ds[i + 1] = -gam * abs(r) * _sgn(z) * zn - bet * r * zn + A * r
+        if rates:
+            zn = math.pow(abs(z), n)
+            ds[i + 1] = -gam * abs(r) * _sgn(z) * zn - bet * r * zn + A * r
         f_d = c1 * yd + m_k * (k1 * x - f_pre)
         jf = lay[L_PFRAME]
         if jf >= 0:
@@ -228,7 +246,7 @@ def deriv(lay, cst, p, t, a, s, ds):
         if lay[L_LVR] >= 0:
             # series dashpot c_s: the hysteretic element moves at ẋ − F/c_s
             w = xd - f_s / p[lay[L_LVR]]
-        zd = _zdot(form, w, z, q1, q2, q3)
+        zd = _zdot(form, w, z, q1, q2, q3) if rates or form == LUGRE else 0.0
         ds[i] = zd
         f_d = f_s
         if form == LUGRE:
@@ -350,7 +368,8 @@ def rate(lay, cst, p, t, s, vmax):
             n = p[o + 4]
             sg = p[o + 5]
             zf = max(z, 0.1) if n < 1.0 else max(z, 1.0)
-            zn1 = math.pow(zf, n - 1.0)
+            # pow(1, ·) is 1 exactly, and zf is 1 whenever n ≥ 1 and |z| ≤ 1 (σ ≥ 1/2): a pow per call saved
+            zn1 = 1.0 if zf == 1.0 else math.pow(zf, n - 1.0)
             lam = rho * n * zn1 * vmax * (sg + abs(sg - 1.0))
             slope = rho * (1.0 + (sg + abs(sg - 1.0)) * zn1 * zf)
         else:
