@@ -121,45 +121,22 @@ class Budget:
     terms: bool = True
 
 
-#: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's
-#: RK4 sub-steps are set by the model's stiffness, not by the sampling rate: at this record's
-#: least-squares optima a 24-walker likelihood evaluation costs the same at 250 Hz and 1 kHz (measured:
-#: dahl 62 and 65 ms — 19.5 and 4.5 sub-steps per sample —, lugre 13 and 14, bouc-wen 757 and 663,
-#: normalized-bouc-wen 557 and 491, spencer 149 and 163 ms), and the job took 16.8 min at 1 kHz against
-#: 17.8 at 250 Hz with the same budget (issue 16). Every form is offered an emcee posterior that runs
-#: until the package's rule holds (≥ 50 τ, R-hat < 1.01) or for 180 s (``max_seconds``), unless one step
-#: at its least-squares optimum projects the pilot and a minimal chain past those 180 s
-#: (:mod:`bayes_mr.inference.budget`; the headline names it and gives the numbers), and a chain whose own
-#: integrated time projects the rule past them stops there (``stopped`` "projected"). Measured on this
-#: record (2 cores) with RK4 alone: spencer 0.38 s per step of its 56 walkers (~192 s projected),
-#: normalized-bouc-wen 0.79 s of 28 (~393 s), bouc-wen 0.58 s of 24 (~288 s) — none started. With the
-#: Rosenbrock step on stiff device intervals (bayes_mr.models.integrate; issue 16, round 3) normalized-bouc-wen
-#: costs ~0.09 s a step and converges in ~130 s (1400 steps, τ 12), and bouc-wen and spencer start but stop
-#: on their projection after 100-150 steps (τ 7 and 11 there, R-hat 1.7-2.1). With the sampler's
-#: pilot-fitted independence move (200-step pilot, a check every 50 steps) dahl converged at 450 steps
-#: (16 s) and lugre at 1100 (21 s) (DE alone: 3000 and 5500 steps, 66 and 84 s), and the job took
-#: 13.8 min (16.2 with a 500-step pilot and bouc-wen run to 150 s). Both forms'
-#: stiffness k sits on its lower bound on this record, and least squares' covariance gave it an SD of
-#: many box widths until it was capped at one (calibrate.within_prior); the walkers start from that
-#: spread (mirrored into the box, not redrawn), and with it dahl converged at 550 steps (18 s) and lugre
-#: at 600 (14 s), the job 12.6 min. Classic Bouc–Wen with a sign-free γ finds its best fit in the β₁ ≈ −γ valley on this
-#: record (a linear loading branch and a very stiff unloading one), where every evaluation needs ~26
-#: sub-steps per 1-kHz sample and a step ~0.7 s: run to its 150 s it stopped ~100 steps after its
-#: pilot, NOT converged, so the projection now leaves it out and says why. Selection is by the Laplace evidence
-#: every form has; a thermodynamic-integration ladder per form (several minutes each on this record)
-#: does not fit — ``bayes-mr compare --engines mcmc`` runs it.
-#: The limit was 150 s until one BLAS thread (bayes_mr._threads) took the job from 16.1 to 10.1-11.0 min: with
-#: 150 s normalized-bouc-wen converged in one run (1500 steps, 135 s) and stopped at the limit in the next
-#: (1577 steps, R-hat 1.0109); with 180 s it converged at 1750 steps (168 s) and the job took 11.7 min. With the
-#: sampler's adaptation rounds (inference/mcmc.py) it converged at 1300 steps (136 s), lugre at 650 (6 s), dahl at
-#: 500 (10 s), and the job took 12.1 min; bouc-wen and spencer still stopped on their projection 150 steps into
-#: the chain proper (R-hat 1.18 and 1.30; pilot and rounds may spend half the 180 s). Run unbudgeted, spencer's τ
-#: keeps growing with the chain (26 steps after 800, R-hat 1.08) and bouc-wen's too (18 after 600, R-hat 1.09):
-#: neither converges in minutes on 2 cores, so the limit stays at 180 s and the headline says why. With the
-#: independence proposals drawn inside the box (inference/moves.py) normalized-bouc-wen converged at 850 steps
-#: (112 s) and the job took 11.5 min; spencer's acceptance rose 0.155 -> 0.219, but unbudgeted it still had
-#: R-hat 1.033 after 1200 steps (τ 25); before that change, 30 walkers instead of 56 made its pilot mix
-#: worse (acceptance 0.06, R-hat 1.21 after 2000 steps).
+#: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's RK4
+#: sub-steps are set by the model's stiffness, not by the sampling rate, so 1 kHz costs about what 250 Hz did
+#: (a 24-walker evaluation at the least-squares optima: dahl 65 against 62 ms, bouc-wen 663 against 757 ms).
+#: Every form is offered an emcee posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or
+#: for 180 s (``max_seconds``). One whose measured step cost at its least-squares optimum projects the pilot and
+#: a minimal chain past that is not started, and a chain whose own integrated time projects the rule past it
+#: stops there (``stopped`` "projected"); the headline names either and gives the numbers
+#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores): normalized-bouc-wen converges in ~850 steps (~112 s),
+#: dahl and lugre in 500-750 (10-20 s); bouc-wen, whose best fit lies in the β₁ ≈ −γ valley (~26 sub-steps per
+#: sample), and spencer, five weakly informed parameters on a plateau out to the prior's bound, stop on their
+#: projection. Run unbudgeted their τ keeps growing with the chain (bouc-wen 18 after 600 steps, R-hat 1.09;
+#: spencer 25 after 1200, R-hat 1.03): converging them would take several minutes more than the 15-minute job
+#: has. With this limit the job takes 11.5-13 min; it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`)
+#: made room.
+#: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
+#: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None,
