@@ -240,9 +240,9 @@ def _load(path: Path):
     return mod
 
 
-def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | None = None) -> Path:
-    """:func:`module_path`, memoised (hashing the kernel's sources reads files)."""
-    inline = _inline_for(lay_t, inline)
+def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...]) -> Path:
+    """:func:`module_path`, memoised (hashing the kernel's sources reads files); ``inline`` as resolved by
+    :func:`_inline_for`."""
     key = (id(dispatcher), lay_t, inline)
     with _lock:
         path = _paths.get(key)
@@ -251,9 +251,8 @@ def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | N
     return path
 
 
-def _generated(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...] | None = None) -> Path:
-    """Path of the generated module, written if missing."""
-    inline = _inline_for(lay_t, inline)
+def _generated(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...]) -> Path:
+    """Path of the generated module, written if missing (``inline`` resolved, as for :func:`_path`)."""
     path = _path(dispatcher, lay_t, inline)
     if not path.exists():
         _write_atomic(path, _source(dispatcher, lay_t, inline))
@@ -327,7 +326,7 @@ def _start_background(dispatcher, lay_t: tuple[int, ...] | None, argtypes: tuple
     in the caller's process group, so an interrupt stops it with the caller;
     a caller that ends normally leaves it to finish for the next process.
     """
-    path = _generated(dispatcher, lay_t)
+    path = _generated(dispatcher, lay_t, _inline_for(lay_t, None))
     marker = ready_path(path, argtypes)
     with _lock:
         if marker in _started:
@@ -371,7 +370,7 @@ class _Auto:
         d = self.dispatcher
         tiers = {"specialised": (self.lay,), "inlined": (None,)}.get(self.eager, (self.lay, None))
         for lay in tiers:
-            marker = ready_path(_path(d, lay), argtypes)
+            marker = ready_path(_path(d, lay, _inline_for(lay, None)), argtypes)
             if self.eager or marker.exists():
                 if lay is None and self.pays:
                     _start_background(d, self.lay, argtypes)  # the inlined kernel runs meanwhile
