@@ -38,6 +38,7 @@ from ._specialise import compiled_here
 from .bench_kernels import kernel_bench
 from .inference import ukf
 from .inference import ukf_kernel as K
+from .inference.geometry import chain_geometry
 from .likelihood import OutputError
 from .models import get_model
 from .signals import thesis_signal
@@ -297,6 +298,8 @@ def boucwen_benchmark_timing(seed: int = 0, mcmc_seconds: float = 480.0) -> dict
             "boucwen_mcmc_walkers": chain.n_walkers, "boucwen_mcmc_converged": chain.converged,
             "boucwen_mcmc_stopped": chain.stopped, "boucwen_mcmc_tau_max": float(np.max(chain.tau)),
             "boucwen_mcmc_rhat_max": float(np.max(chain.rhat)),
+            "boucwen_mcmc_geometry": chain_geometry(chain.chain[chain.burn:], lik.lower, lik.upper, chain.names,
+                                                    chain.tau),
             "boucwen_lsq_max_z": float(max(z_lsq)), "boucwen_mcmc_max_z": float(z_mcmc.max()),
             "boucwen_input_interp": f"{lik.inputs.interp} (×{lik.inputs.upsample})",
             "boucwen_record": f"Bouc–Wen benchmark training record, {lik.y.shape[0]} samples"}

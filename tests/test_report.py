@@ -140,3 +140,24 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
     timed_out = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_seconds", projection=None)
     chains, = _posterior_lines([timed_out], "spencer", {})
     assert "spencer (time limit: 1326 steps = 110 τ, R-hat 1.0109) NOT converged" in chains
+
+
+def test_an_unconverged_headline_names_the_shape_that_makes_the_chain_slow():
+    """A chain the budget stopped says which coordinates spread over their prior and which lie on a ridge
+    (``geometry``, from :func:`bayes_mr.inference.geometry.chain_geometry`); a converged one says nothing more."""
+    from bayes_mr.report.headline import _posterior_lines
+
+    geometry = {"slowest": [["k1", 9.2]], "spread_over_prior": {"k1": 0.973, "k0": 0.94},
+                "ridges": [["gamma", "n", 0.9965]]}
+    row = {"engine": "mcmc", "model": "spencer", "n_steps": 200, "tau_max": 9.2, "rhat_max": 1.16,
+           "converged": False, "stopped": "max_steps", "geometry": geometry}
+    chains, = _posterior_lines([row], "spencer", {})
+    assert ("R-hat 1.1600; k1, k0 spread over 97, 94 % of their prior ranges (the record hardly informs them); "
+            "gamma and n on a ridge (correlation +0.997: the record fixes a combination of them)) NOT converged"
+            ) in chains
+    one = dict(row, geometry={"spread_over_prior": {}, "ridges": [["beta1", "gamma", -0.99999]]})
+    assert "R-hat 1.1600; beta1 and gamma on a ridge (correlation -1.000" in _posterior_lines([one], "x", {})[0]
+    plain = dict(row, geometry={"slowest": [["k1", 9.2]], "spread_over_prior": {}, "ridges": []})
+    assert "R-hat 1.1600) NOT converged" in _posterior_lines([plain], "x", {})[0]
+    converged = dict(row, converged=True, stopped="converged")
+    assert "spread" not in _posterior_lines([converged], "x", {})[0]

@@ -10,6 +10,7 @@ from .calibrate import adjust_draws, describe, loewner_max, truncate_to_box
 from .checkpoint import seed_of
 from .evidence import Evidence, select_route
 from .evidence_scale import calibration_info
+from .geometry import chain_geometry
 from .mcmc import MCMCResult
 
 
@@ -41,7 +42,8 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         one (:func:`~bayes_mr.inference.calibrate.adjust_draws`; ``lp`` stays the sampled draws' log posterior) and
         truncated to the prior's box (:func:`~bayes_mr.inference.calibrate.truncate_to_box`; the fraction
         outside is ``uncertainty.draws_outside_prior``); the point is the maximum-posterior step after burn-in;
-        ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate.
+        ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate; ``info["geometry"]`` what makes the
+        chain slow (:func:`~bayes_mr.inference.geometry.chain_geometry` of the chain after burn-in).
     """
     p = lik.n_params
     coords = lik.par.coords
@@ -70,6 +72,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         "pilot_steps": result.pilot_steps, "adapt_acceptance": [float(a) for a in result.adapt_acceptance],
         "converged": bool(result.converged), "stopped": result.stopped, "seed_entropy": result.seed_entropy,
         "projection": result.projection,
+        "geometry": chain_geometry(result.chain[result.burn:], lik.lower, lik.upper, result.names, result.tau),
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)

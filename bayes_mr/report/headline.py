@@ -169,16 +169,34 @@ def _stop_reason(row: dict) -> str:
     return STOP_REASONS.get(row.get("stopped"), "budget")
 
 
+def chain_shape(geometry: dict | None) -> str:
+    """What makes a chain slow, from its ``geometry`` (:func:`~bayes_mr.inference.geometry.chain_geometry`): the
+    coordinates spread over their prior range and the ridges; empty when it found neither."""
+    if not geometry:
+        return ""
+    parts = []
+    spread = geometry.get("spread_over_prior") or {}
+    if spread:
+        one = len(spread) == 1
+        parts.append(f"{', '.join(spread)} spread over {', '.join(f'{100 * f:.0f}' for f in spread.values())} % of "
+                     f"{'its prior range' if one else 'their prior ranges'} (the record hardly informs "
+                     f"{'it' if one else 'them'})")
+    for a, b, r in geometry.get("ridges") or []:
+        parts.append(f"{a} and {b} on a ridge (correlation {r:+.3f}: the record fixes a combination of them)")
+    return "; " + "; ".join(parts) if parts else ""
+
+
 def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str]) -> list[str]:
     """The headline's emcee sentence: which posteriors converged, which did not and why (the chain's length in
-    integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked), and which forms
-    got none (the selected one named first)."""
+    integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked, and the shape that
+    makes it slow: :func:`chain_shape`), and which forms got none (the selected one named first)."""
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
     lines = []
     if chains:
         unconverged = [f"{r['model']} ({_stop_reason(r)}: {r.get('n_steps')} steps = "
                        f"{_multiple((r.get('n_steps') or 0) / r['tau_max']) if r.get('tau_max') else '?'} τ, "
-                       f"R-hat {_rhat(r.get('rhat_max'))})" for r in chains if not r.get("converged")]
+                       f"R-hat {_rhat(r.get('rhat_max'))}{chain_shape(r.get('geometry'))})"
+                       for r in chains if not r.get("converged")]
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
                      f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
                      f"{', '.join(_rhat(r.get('rhat_max')) for r in chains)}): "

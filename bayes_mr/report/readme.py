@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .headline import STOP_REASONS, headline
+from .headline import STOP_REASONS, chain_shape, headline
 
 #: The run's figures shown in the README, in order (keys of :func:`readme_figures`).
 RUN_FIGURES = ("force_b", "force_velocity_b", "residual_velocity_b", "force_second", "diagnose_hysteresis",
@@ -107,7 +107,8 @@ def bench_section(r: dict) -> str:
     rows += _kernel_rows(r)
     if "boucwen_lsq_s" in r:
         verdict = ("converged" if r["boucwen_mcmc_converged"] else
-                   f"NOT converged: stopped on its {STOP_REASONS.get(r.get('boucwen_mcmc_stopped'), 'budget')}")
+                   f"NOT converged: stopped on its {STOP_REASONS.get(r.get('boucwen_mcmc_stopped'), 'budget')}"
+                   f"{chain_shape(r.get('boucwen_mcmc_geometry'))}")
         rows += [(f"least squares, bouc-wen, {r['boucwen_record']}, {r['boucwen_input_interp']} inputs "
                   f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)", f"{r['boucwen_lsq_s']:.0f} s"),
                  (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, τ_max "

@@ -16,7 +16,7 @@ import xarray as xr
 from ..comparison import row_of as _row, simulating_point
 from ..identify import predict
 from .figures import binned, command_loops, hysteresis, save, time_series
-from .headline import diagnosis_sentence, headline, second_record_sentence
+from .headline import chain_shape, diagnosis_sentence, headline, second_record_sentence
 from .markdown import fmt, markdown_table
 
 
@@ -217,10 +217,10 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
         out.append(f"- {form}: {why}.")
     conv = [r for r in summary["rows"] if r["engine"] == "mcmc" and "error" not in r]
     if conv:
-        out += ["", "MCMC diagnostics: " + "; ".join(
-            f"{r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
+        out += ["", "MCMC diagnostics (with what makes a chain slow, read from its draws):", ""] + [
+            f"- {r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
             f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (' + str(r.get('stopped', 'budget')) + ')'}"
-            for r in conv) + "."]
+            f"{chain_shape(r.get('geometry'))}." for r in conv]
     out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
             "![force–velocity by command](force_velocity_part_b.png)", "",
             "![residual by velocity](residual_velocity_part_b.png)", "",

@@ -333,6 +333,8 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     s = results.summary_of(idata)
     assert s.engine == "mcmc" and s.log_evidence == pytest.approx(lsq.log_evidence)
     assert s.extra["evidence_route"] == "laplace"
+    assert set(s.extra["geometry"]) == {"slowest", "spread_over_prior", "ridges"}
+    assert [name for name, _ in s.extra["geometry"]["slowest"]] == [lik.names[j] for j in np.argsort(-res.tau)[:3]]
     assert s.params["k"] == pytest.approx(float(post["k"].mean()))
     assert 150 < s.mse < 250  # the maximum-posterior point fits to the noise (≈ 200 = 100 per channel)
     path = results.save(idata, tmp_path / "fit.nc")
