@@ -5,13 +5,12 @@ import pytest
 
 from bayes_mr.models import get_model, kernel
 from bayes_mr.models.forms import FORMS
-from bayes_mr.models.model import _BUILT_IN
 
 #: Effects that change the force (or the states it reads); each form is checked alone and under all of them
 #: (less those a form models itself, like spencer's voltage dependence).
 FORCE_EFFECTS = ("force_offset", "voltage_dependence", "stiffness_drift", "asymmetry", "small_amplitude_regime",
                  "low_velocity_rolloff", "cubic_stiffness", "stribeck_friction")
-WITH_EFFECTS = ["+".join([f, *(e for e in FORCE_EFFECTS if e not in _BUILT_IN.get(f, ()))]) for f in FORMS]
+WITH_EFFECTS = ["+".join([f, *(e for e in FORCE_EFFECTS if e not in FORMS[f].built_in)]) for f in FORMS]
 
 
 @pytest.mark.parametrize("kind", ["structure", "device", "forced"])

@@ -50,7 +50,6 @@ from ..executor import Outcome, run_jobs, share
 from ..likelihood import OutputError
 from ..models import EFFECTS, Effect, Model
 from ..models.effects import DEVICE_ONLY, ON_COMMAND
-from ..models.model import _BUILT_IN
 from .fits import Fit, refit
 from .inflation import design_effect
 from .residuals import envelope, varying_voltage
@@ -160,7 +159,7 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
     displacement and acceleration can each lag).
     """
     kind = record.attrs["kind"]
-    have = {e.name for e in model.effects} | set(_BUILT_IN.get(model.form.name, ()))
+    have = {e.name for e in model.effects} | set(model.form.built_in)
     out = []
     for name, effect in EFFECTS.items():
         if name in have:

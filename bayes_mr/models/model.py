@@ -98,6 +98,12 @@ class Form:
     derived: tuple[Ratio, ...] = ()
     ros2: bool = True
 
+    @property
+    def built_in(self) -> tuple[str, ...]:
+        """Effects this form models itself (``spencer``'s voltage dependence and low-velocity roll-off), which
+        cannot be added to it."""
+        return _BUILT_IN.get(self.name, ())
+
     def __add__(self, effect: Effect) -> Model:
         return Model(self) + effect
 
@@ -119,7 +125,7 @@ class Model:
         if len(set(names)) != len(names):
             raise ValueError(f"effect repeated in {self.name}")
         for e in names:
-            if e in _BUILT_IN.get(self.form.name, ()):
+            if e in self.form.built_in:
                 raise ValueError(f"'{self.form.name}' already models {e}; drop '+{e}'")
 
     def __add__(self, effect: Effect) -> "Model":
