@@ -73,8 +73,8 @@ INLINED_TIER = ("run_batch",)
 #: site for all four RK4 stages, so it is inlined once (a fifth of the compile time, ~220 s -> 47 s). The UKF's
 #: sigma-point arithmetic (:mod:`.inference.unscented_kernel`) is inlined so the filter's sizes are constants in its
 #: loops (a dahl filter run on signal I 2.27 -> 1.68–1.82 µs per sample).
-INLINE = ("deriv", "forces", "rate", "substeps", "advance", "observe", "cholesky", "sigma_points", "moments",
-          "sigma_thetas")
+INLINE = ("deriv", "forces", "rate", "substeps", "advance", "advance_points", "observe", "cholesky", "sigma_points",
+          "moments", "sigma_thetas")
 #: Inlined as well in a kernel specialised to one layout: the simulator's loop, into ``models.drivers.run_one``,
 #: whose one scratch array then keeps RK4's stages in registers (dahl structure step 31.8 -> 25.4 ns; in the
 #: inlined kernel, layout unknown, 47 -> 249 ns, so not there). The UKF's loop the same way: no gain.

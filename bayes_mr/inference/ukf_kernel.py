@@ -3,12 +3,14 @@
 Augmented state X = [model states s, φ] with φ the free parameters in the
 thesis's log-scaled coordinates (3-37). The transition integrates s over one
 sample with the model's RK4 (sub-steps shared by all sigma points, so the
-transform sees the model and not the step control) and keeps φ; the
-observation is the measured channels at the new sample: [x, ẍ+ẍ_g] for a
-structure test, [F] for a device test. Noise is additive (Q, R), sigma points
-are re-used for the observation (as filterpy does), and the innovation
-log-likelihood Σ log N(y_k; ŷ_k⁻, P_yy,k) is accumulated as the UKF's
-evidence.
+transform sees the model and not the step control; evaluated stage by stage
+across the sigma points, :func:`~bayes_mr.models.integrate.advance_points`) and
+keeps φ; the observation is the measured channels at the new sample:
+[x, ẍ+ẍ_g] for a structure test, [F] for a device test. Noise is additive
+(Q, R); the observation is evaluated at sigma points drawn again about the
+prediction, so that it sees Q (filterpy re-uses the propagated ones, its
+issue #172), and the innovation log-likelihood Σ log N(y_k; ŷ_k⁻, P_yy,k) is
+accumulated as the UKF's evidence.
 
 Robustness (DESIGN.md "Numerics"): P is symmetrised every step; a failed
 Cholesky gets jitter 1e-9·tr(P)/L ×10 up to five times, then the run stops
@@ -25,7 +27,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import driver, hot
-from ..models.integrate import DECIDE, advance, substeps, work_shape
+from ..models.integrate import DECIDE, advance, advance_points, substeps, work_shape
 from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, channel, deriv, forces, rate
 from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
 
@@ -86,7 +88,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
     w0m, w0c, wi, spread, ab, central = weights
     S, Pj, X, TH, d, DX = sig
-    K1, work, sbuf = pbuf
+    K1, work, stages, taken = pbuf
     ns = lay[L_NS]
     L = lay[U_L]
     nsig = 2 * L + 1
@@ -105,14 +107,11 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
         if r_i > lam:
             lam = r_i
     n_sub = substeps(lay, cst, lam, h)
+    advance_points(lay, cst, TH, t, h, a0, a1, X, K1, nsig, n_sub, work, stages, taken)
     finite = True
     for i in range(nsig):
         for q in range(ns):
-            sbuf[q] = X[i, q]
-        advance(lay, cst, TH[i], t, h, a0, a1, sbuf, K1[i], n_sub, DECIDE, work)
-        for q in range(ns):
-            X[i, q] = sbuf[q]
-            if not math.isfinite(sbuf[q]):
+            if not math.isfinite(X[i, q]):
                 finite = False
     if not finite:
         return NON_FINITE, jit, n_sub
@@ -359,7 +358,8 @@ def ukf_run(
     K1 = np.zeros((nsig, ns))
     Y = np.zeros((nsig, ny))
     work = np.zeros(work_shape(ns))
-    sbuf = np.zeros(ns)
+    stages = np.zeros((nsig, 3, ns))
+    taken = np.zeros(nsig, np.bool_)
     dsbuf = np.zeros(ns)
     d = np.zeros(L)
     mx = np.zeros(L)
@@ -381,7 +381,7 @@ def ukf_run(
         (w0m, w0c, wi, spread, ab, central),
         (stride, hist_m, hist_sd, states_m, store_states, info),
         (S, Pj, X, TH, d, DX),
-        (K1, work, sbuf),
+        (K1, work, stages, taken),
         (Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY),
         P0s,
     )

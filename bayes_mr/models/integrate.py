@@ -260,3 +260,68 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
             s[q] += hs6 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
         _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs)
     return False
+
+
+@hot
+def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages, taken):
+    """:func:`advance` (mode :data:`DECIDE`) of ``n_pts`` state vectors over one interval, stage by stage across them.
+
+    Point i has the states X[i, :ns], the parameters TH[i] and f(X[i], a0) in K1[i]; all share ``n_sub``. The
+    numbers are those of n_pts calls of :func:`advance` in turn (the same operations on each point, and ROS2's
+    error scale in ``work`` met in the same order), but RK4's stage k is evaluated for every point before stage
+    k + 1 of any: the points' right-hand sides are independent, so the processor overlaps their evaluations —
+    a |z|ⁿ of one point need not finish before the next point's starts, as it must within one point's chain of
+    stages. The sigma points of the UKF (:mod:`bayes_mr.inference.ukf_kernel`) are such a set.
+
+    ``stages`` is scratch (≥ n_pts, 3, ns) for RK4's k₂..k₄ of every point, ``taken`` (≥ n_pts,) bool receives
+    whether a point's interval took ROS2 (a device test where n_sub > ``cst[K_STIFF]``).
+    """
+    ns = lay[L_NS]
+    if lay[L_KIND] == DEVICE and n_sub > cst[K_STIFF]:
+        for i in range(n_pts):
+            taken[i] = _ros2(lay, cst, TH[i], t, h, a0, a1, X[i, :ns], K1[i], True, work)
+    else:
+        for i in range(n_pts):
+            taken[i] = False
+    tmp = work[3]
+    am = work[4]
+    inv_n = 1.0 / n_sub
+    hs = h * inv_n
+    hs6 = hs / 6.0
+    for j in range(n_sub):
+        tj = t + j * hs
+        for st in range(4):
+            if st == 0 and j == 0:
+                continue  # every k1 = f(s, a0) was handed in
+            if st == 0:
+                c = 0.0
+            elif st == 3:
+                c = 1.0
+            else:
+                c = 0.5
+            f = (j + c) * inv_n
+            for q in range(3):
+                am[q] = a0[q] + f * (a1[q] - a0[q])
+            for i in range(n_pts):
+                if taken[i]:
+                    continue
+                if st == 0:
+                    for q in range(ns):
+                        tmp[q] = X[i, q]
+                else:
+                    kp = K1[i] if st == 1 else stages[i, st - 2]
+                    for q in range(ns):
+                        tmp[q] = X[i, q] + c * hs * kp[q]
+                kn = K1[i] if st == 0 else stages[i, st - 1]
+                deriv(lay, cst, TH[i], tj + c * hs, am, tmp, kn)
+        for i in range(n_pts):
+            if taken[i]:
+                continue
+            s = X[i]
+            k1 = K1[i]
+            k2 = stages[i, 0]
+            k3 = stages[i, 1]
+            k4 = stages[i, 2]
+            for q in range(ns):
+                s[q] += hs6 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+            _after_substep(lay, cst, TH[i], s, a0, a1, am, j, inv_n, hs)

@@ -1,0 +1,82 @@
+"""RK4 stage by stage across points (models.integrate.advance_points) gives advance's numbers, point by point."""
+
+import numpy as np
+import pytest
+
+from bayes_mr.models import get_model, integrate, kernel
+from bayes_mr.models.forms import FORMS
+from test_kernel_forces import FORCE_EFFECTS
+
+#: Each form alone and under every force-changing effect and the two updates between sub-steps (the coil's lag and
+#: the amplitude envelope), less those a form models itself.
+EFFECTS = (*FORCE_EFFECTS, "field_dynamics")
+WITH_EFFECTS = ["+".join([f, *(e for e in EFFECTS if e not in FORMS[f].built_in)]) for f in FORMS]
+
+
+def _inputs(t):
+    """A 2 Hz, 1 cm stroke at 1 V (device and forced tests) or ground motion (structure test) at time t."""
+    w = 2.0 * np.pi * 2.0
+    return np.array([0.01 * np.sin(w * t), 0.01 * w * np.cos(w * t), 1.0])
+
+
+def _points(model, kind, cst, rng, n_pts, t):
+    """Parameters near the model's defaults and states near those of a 2 Hz stroke at time t, ``n_pts`` points.
+
+    The states come from integrating the stroke from rest (fine RK4 steps), so a hysteretic state sits on its
+    branch where the piston moves: the intervals on which a device test's ROS2 step passes its error test."""
+    lay = model.layout(kind)
+    theta = model.theta(kind, {})
+    ns = int(lay[kernel.L_NS])
+    s = np.zeros(ns)
+    work = np.zeros(integrate.work_shape(ns))
+    h = 1e-3
+    for k in range(int(t / h)):
+        k1 = np.zeros(ns)
+        kernel.deriv(lay, cst, theta, k * h, _inputs(k * h), s, k1)
+        integrate.advance(lay, cst, theta, k * h, h, _inputs(k * h), _inputs((k + 1) * h), s, k1, 20,
+                          integrate.RK4, work)
+    TH = theta * np.exp(0.05 * rng.standard_normal((n_pts, theta.size)))
+    X = np.zeros((n_pts, ns + 4))  # wider than the states, as a UKF's augmented sigma points are
+    X[:, :ns] = s * (1.0 + 0.01 * rng.standard_normal((n_pts, ns)))
+    return lay, ns, TH, X
+
+
+@pytest.mark.parametrize("kind", ["structure", "device", "forced"])
+@pytest.mark.parametrize("name", [*FORMS, *WITH_EFFECTS])
+def test_advance_points_equals_advance_of_each_point(name, kind):
+    """Bit for bit, with ROS2 tried (a device test's stiff intervals: n_sub above K_STIFF) and its error scale
+    carried from interval to interval in the shared scratch."""
+    model = get_model(name)
+    cst = model.constants(50.0)
+    rng = np.random.default_rng(11)
+    n_pts = 7
+    taken_any = []
+    work_one = np.zeros(integrate.work_shape(int(model.layout(kind)[kernel.L_NS])))
+    work_all = work_one.copy()
+    for trial in range(8):
+        t = rng.uniform(0.1, 0.5)
+        lay, ns, TH, X = _points(model, kind, cst, rng, n_pts, t)
+        h = (1e-3, 1e-2)[trial % 2]
+        n_sub = (1, 3, 5, 8)[trial % 4]
+        a0, a1 = _inputs(t), _inputs(t + h)
+        K1 = np.zeros((n_pts, ns))
+        for i in range(n_pts):
+            kernel.deriv(lay, cst, TH[i], t, a0, X[i, :ns], K1[i])
+        want = X.copy()
+        want_taken = []
+        for i in range(n_pts):
+            s = want[i, :ns].copy()
+            want_taken.append(integrate.advance(lay, cst, TH[i], t, h, a0, a1, s, K1[i].copy(), n_sub,
+                                                integrate.DECIDE, work_one))
+            want[i, :ns] = s
+        taken = np.zeros(n_pts, np.bool_)
+        stages = np.zeros((n_pts, 3, ns))
+        got = X.copy()
+        integrate.advance_points(lay, cst, TH, t, h, a0, a1, got, K1.copy(), n_pts, n_sub, work_all, stages, taken)
+        np.testing.assert_array_equal(got, want)
+        assert list(taken) == want_taken
+        taken_any += want_taken
+    if kind == "device" and model.form.ros2:
+        assert any(taken_any) and not all(taken_any)  # both methods met
+    else:
+        assert not any(taken_any)
