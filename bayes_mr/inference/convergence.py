@@ -159,7 +159,6 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
                     diag["stopped"] = ("converged" if diag["converged"]
                                        else "max_steps" if it >= settings.max_steps
                                        else "max_seconds" if out_of_time else "projected")
-                    diag["converged"] = diag["converged"] and not out_of_time
                     diag["projection"] = ahead if diag["stopped"] == "projected" else None
                     break
             target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)

@@ -21,6 +21,10 @@ interrupted and resumed run takes the same decisions):
    rank-normalised split R-hat (ArviZ; walkers as chains) of every coordinate
    is below ``rhat_max``; otherwise continue, up to ``max_steps``.
 
+With a wall-time budget (``max_seconds``) the chain is checked once more
+where the budget runs out, off the grid; a chain that meets the rule there is
+converged (``stopped`` "converged"), else it stopped on "max_seconds".
+
 Moves: an independence proposal from a multivariate t fitted to a pilot
 chain (70 %, :class:`~bayes_mr.inference.moves.Independence`), differential
 evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and the DE snooker update

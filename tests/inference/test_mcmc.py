@@ -172,6 +172,12 @@ def test_a_wall_time_budget_stops_the_run_and_says_so():
     assert res.history[-1]["step"] == res.n_steps
     free = sample(fast, mu, C, MCMCSettings(seed=1, progress=False))
     assert free.converged and free.stopped == "converged"
+    # the check the clock forces sits off the check_every grid; a chain that meets the rule there is converged,
+    # and says so in both fields (it once read converged False with stopped "converged": "NOT converged (converged)")
+    late = sample(fast, mu, C, MCMCSettings(seed=1, max_steps=10**6, max_seconds=2.0, check_every=10**6,
+                                            pilot_steps=0, moves=(("de", 0.8), ("snooker", 0.2)), progress=False))
+    assert late.n_steps < 10**6 and late.history[-1]["step"] == late.n_steps
+    assert late.converged and late.stopped == "converged"
 
 
 def test_a_chain_that_cannot_meet_the_rule_in_its_budget_stops_when_that_is_projected():
