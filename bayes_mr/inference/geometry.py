@@ -7,12 +7,11 @@ account for the cases met on measured dampers, and both can be read off the
 chain without another likelihood evaluation:
 
 * a coordinate the record hardly informs: its draws spread over most of the
-  prior's range (spencer's accumulator and high-velocity stiffnesses on the
-  packaged damper), so the chain must cross the whole box, whose edges cut
-  the proposal;
+  prior's range (spencer's c1b on the packaged damper), so the chain must
+  cross the whole box, whose edges cut the proposal;
 * a ridge: two coordinates the record fixes only in combination, so their
   draws lie along a line or a curve (the classic Bouc–Wen law's β₁ and γ where
-  the loading branch is linear, β₁ + γ ≈ 0).
+  the loading branch is linear, β₁ + γ ≈ 0; spencer's γ and n).
 
 :func:`chain_geometry` names them, with the coordinates of longest integrated
 time, so that a report can say *why* a chain is slow, not only that it is.
