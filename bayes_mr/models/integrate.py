@@ -206,6 +206,22 @@ def _ros2(lay, cst, p, t, h, a0, a1, s, k1, check, work):
     return True
 
 
+@hot(inline="always")
+def _stage_inputs(st, j, inv_n, a0, a1, am):
+    """RK4 stage ``st`` of sub-step ``j``: its node c = 0, ½, ½, 1 (returned) and the inputs there into ``am`` (linear
+    between a0 and a1 over the interval of 1/inv_n sub-steps)."""
+    if st == 0:
+        c = 0.0
+    elif st == 3:
+        c = 1.0
+    else:
+        c = 0.5
+    f = (j + c) * inv_n
+    for q in range(3):
+        am[q] = a0[q] + f * (a1[q] - a0[q])
+    return c
+
+
 @hot
 def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
     """Integrate ``s`` in place over one sample interval [t, t+h] (module docstring).
@@ -234,16 +250,8 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
         for st in range(4):
             if st == 0 and j == 0:
                 continue  # k1 = f(s, a0) was handed in
-            # stage st: the state s + c·hs·k_{st-1} at the time tj + c·hs, c = 0, ½, ½, 1
-            if st == 0:
-                c = 0.0
-            elif st == 3:
-                c = 1.0
-            else:
-                c = 0.5
-            f = (j + c) * inv_n
-            for q in range(3):
-                am[q] = a0[q] + f * (a1[q] - a0[q])
+            # stage st: the state s + c·hs·k_{st-1} at the time tj + c·hs
+            c = _stage_inputs(st, j, inv_n, a0, a1, am)
             if st == 0:
                 for q in range(ns):
                     tmp[q] = s[q]
@@ -293,15 +301,7 @@ def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages
         for st in range(4):
             if st == 0 and j == 0:
                 continue  # every k1 = f(s, a0) was handed in
-            if st == 0:
-                c = 0.0
-            elif st == 3:
-                c = 1.0
-            else:
-                c = 0.5
-            f = (j + c) * inv_n
-            for q in range(3):
-                am[q] = a0[q] + f * (a1[q] - a0[q])
+            c = _stage_inputs(st, j, inv_n, a0, a1, am)
             for i in range(n_pts):
                 if taken[i]:
                     continue
