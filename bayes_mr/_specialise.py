@@ -70,7 +70,8 @@ INLINED_TIER = ("run_batch",)
 
 #: Compiled functions inlined into their callers in the specialised and inlined kernels (the per-sub-step physics):
 #: 1.5-2.4x on the dahl structure step with the layout constant (1.3x without). ``advance`` calls ``deriv`` from one
-#: site for all four RK4 stages, so it is inlined once (a fifth of the compile time, ~220 s -> 47 s). The UKF's
+#: site for all four RK4 stages, so it is inlined once (a fifth of the compile time, ~220 s -> 47 s); so does the UKF's
+#: ``advance_points``, which replaces ``advance`` in the filter's step (not a second inlined copy there). The UKF's
 #: sigma-point arithmetic (:mod:`.inference.unscented_kernel`) is inlined so the filter's sizes are constants in its
 #: loops (a dahl filter run on signal I 2.27 -> 1.68–1.82 µs per sample).
 INLINE = ("deriv", "forces", "rate", "substeps", "advance", "advance_points", "observe", "cholesky", "sigma_points",
