@@ -50,9 +50,9 @@ class Simulation:
     failed : ndarray of int, shape (B,)
         Sample where the state became non-finite, or -1.
     schedule : ndarray of int, shape (B, S·(N-1))
-        RK4 sub-steps each interval of the simulation grid asked for (S =
+        RK4 sub-steps each interval of the simulation grid took (S =
         ``Inputs.upsample``: 1 unless the input is reconstructed band-limited),
-        negative where the interval was taken by ROS2 instead
+        or minus the number of ROS2 steps where ROS2 took it instead
         (:mod:`bayes_mr.models.integrate`); replaying it replays both.
     """
 

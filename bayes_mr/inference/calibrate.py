@@ -89,8 +89,9 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
     base, sim = lik.predict(np.atleast_2d(phi))
     if sim.schedule is not None:
         # Ω's precision is not worth minutes: at most REPLICA_SUBSTEPS RK4 sub-steps of replicas in all
-        # (a stiff point on a long record needs hundreds per sample; an interval ROS2 took counts what RK4
-        # would have asked, so the count does not depend on the integrator), never fewer than MIN_DRAWS
+        # (a stiff point on a long record needs hundreds per sample; an interval ROS2 took counts its steps,
+        # each ns + 2 right-hand sides against a sub-step's 4 for a device test's few states), never fewer
+        # than MIN_DRAWS
         n = min(n, max(MIN_DRAWS, int(REPLICA_SUBSTEPS // max(int(np.sum(np.abs(sim.schedule))), 1))))
     out = np.zeros((n,) + base.shape[1:])
     if not sds:

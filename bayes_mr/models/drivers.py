@@ -56,16 +56,16 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
             return k
         if k == N - 1:
             break
-        if use_schedule:  # a negative count replays an interval taken by ROS2
+        if use_schedule:  # a negative count replays an interval taken in that many ROS2 steps
             n_sub = abs(schedule[k])
             mode = ROS2 if schedule[k] < 0 else RK4
         else:
             lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
             n_sub = substeps(lay, cst, lam, h)
             mode = DECIDE
-        took_ros2 = advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work)
+        n_ros2 = advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work)
         if not use_schedule:
-            schedule[k] = -n_sub if took_ros2 else n_sub
+            schedule[k] = -n_ros2 if n_ros2 > 0 else n_sub
     return -1
 
 
