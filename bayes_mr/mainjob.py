@@ -133,8 +133,9 @@ class Budget:
 #: sample), and spencer, five weakly informed parameters on a plateau out to the prior's bound, stop on their
 #: projection. Run unbudgeted their τ keeps growing with the chain (bouc-wen 18 after 600 steps, R-hat 1.09;
 #: spencer 25 after 1200, R-hat 1.03): converging them would take several minutes more than the 15-minute job
-#: has. With this limit the job takes 11.5-13 min; it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`)
-#: made room.
+#: has — for bouc-wen its τ, not its cost: since ROS2 takes a stiff interval in several steps its budgeted chain
+#: runs ~550 steps instead of 100, and its τ estimate there is 42. With this limit the job takes 11-13 min; it
+#: was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
