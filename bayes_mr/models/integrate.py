@@ -142,7 +142,8 @@ def _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs):
 
 
 #: RK4 sub-steps an interval must need before ROS2 is tried on it: at 1 or 2, RK4 (4 or 8 evaluations of the
-#: right-hand side) costs about what a ROS2 trial does (ns + 1, and RK4's on top when the test rejects it).
+#: right-hand side) costs about what a ROS2 trial does (ns + 1, and RK4's on top when the test rejects it and
+#: no retry in several steps, :func:`_try_ros2`, is cheaper or passes).
 ROS2_ABOVE = 2
 #: Relative error test of a ROS2 interval (module docstring). Measured against RK4 at c_acc = 0.05 on the
 #: packaged damper's device test at each form's least-squares optimum (1 kHz): the force error of RK4 at
@@ -273,9 +274,7 @@ def _try_ros2(lay, cst, p, t, h, a0, a1, s, k1, n_sub, work):
     most = 4.0 * n_sub / (lay[L_NS] + 2.0)  # steps that cost what RK4 does
     if not r < most:  # also an infinite or NaN ratio
         return 0
-    m = int(math.ceil(r))
-    if m < 2:
-        m = 2
+    m = int(math.ceil(r))  # ≥ 2: r > 1
     if m < most and _ros2(lay, cst, p, t, h, a0, a1, s, k1, True, work, m) <= 1.0:
         return m
     return 0
