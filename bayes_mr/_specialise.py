@@ -74,8 +74,8 @@ INLINED_TIER = ("run_batch",)
 #: ``advance_points``, which replaces ``advance`` in the filter's step (not a second inlined copy there). The UKF's
 #: sigma-point arithmetic (:mod:`.inference.unscented_kernel`) is inlined so the filter's sizes are constants in its
 #: loops (a dahl filter run on signal I 2.27 -> 1.68–1.82 µs per sample).
-INLINE = ("deriv", "forces", "rate", "substeps", "advance", "advance_points", "observe", "cholesky", "sigma_points",
-          "moments", "sigma_thetas")
+INLINE = ("deriv", "deriv_pow", "forces", "rate", "substeps", "advance", "advance_points", "point_powers", "observe",
+          "cholesky", "sigma_points", "moments", "sigma_thetas")
 #: Inlined as well in a kernel specialised to one layout: the simulator's loop, into ``models.drivers.run_one``,
 #: whose one scratch array then keeps RK4's stages in registers (dahl structure step 31.8 -> 25.4 ns; in the
 #: inlined kernel, layout unknown, 47 -> 249 ns, so not there). The UKF's loop the same way: no gain.

@@ -52,8 +52,9 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
-from .kernel import DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv
+from .kernel import DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv, deriv_pow
 from .kernel_effects import _coil_step
+from .power import point_powers
 
 #: γ of ROS2 (Verwer et al. 1999): 1 + 1/√2, the root that makes the method L-stable.
 GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
@@ -352,7 +353,7 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
 
 
 @hot
-def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages, taken):
+def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages, taken, pw):
     """:func:`advance` (mode :data:`DECIDE`) of ``n_pts`` state vectors over one interval, stage by stage across them.
 
     Point i has the states X[i, :ns], the parameters TH[i] and f(X[i], a0) in K1[i]; all share ``n_sub``. The
@@ -362,8 +363,14 @@ def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages
     a |z|ⁿ of one point need not finish before the next point's starts, as it must within one point's chain of
     stages. The sigma points of the UKF (:mod:`bayes_mr.inference.ukf_kernel`) are such a set.
 
+    The powers |z|ⁿ of a stage's points (the Bouc–Wen family's costliest operation) are computed together first
+    (:func:`point_powers`, vectorised) and handed to :func:`~bayes_mr.models.kernel.deriv_pow`: they differ
+    from the C library's ``pow`` of :func:`advance` by at most 1 ulp (:mod:`bayes_mr.models.power`), so the
+    points' numbers are those of :func:`advance` to rounding, no longer bit for bit.
+
     ``stages`` is scratch (≥ n_pts, 3, ns) for RK4's k₂..k₄ of every point, ``taken`` (≥ n_pts,) bool receives
-    whether a point's interval took ROS2 (a device test where n_sub > ``cst[K_STIFF]``).
+    whether a point's interval took ROS2 (a device test where n_sub > ``cst[K_STIFF]``), ``pw`` is
+    :func:`point_powers`' scratch.
     """
     ns = lay[L_NS]
     if lay[L_KIND] == DEVICE and n_sub > cst[K_STIFF]:
@@ -383,6 +390,7 @@ def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages
             if st == 0 and j == 0:
                 continue  # every k1 = f(s, a0) was handed in
             c = _stage_inputs(st, j, inv_n, a0, a1, am)
+            point_powers(lay, TH, X, K1, stages, st, c * hs, n_pts, taken, pw)
             for i in range(n_pts):
                 if taken[i]:
                     continue
@@ -394,7 +402,7 @@ def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages
                     for q in range(ns):
                         tmp[q] = X[i, q] + c * hs * kp[q]
                 kn = K1[i] if st == 0 else stages[i, st - 1]
-                deriv(lay, cst, TH[i], tj + c * hs, am, tmp, kn)
+                deriv_pow(lay, cst, TH[i], tj + c * hs, am, tmp, kn, pw[0, i])
         for i in range(n_pts):
             if taken[i]:
                 continue

@@ -100,21 +100,23 @@ def _terms(lay, p, s, x, xd, v, iz, ds):
 
 
 @hot(inline="always")
-def _zdot(form, w, z, q1, q2, q3):
+def _zdot(form, w, z, q1, q2, q3, zn):
     """Hysteretic state rate of the four single-state forms driven by velocity w.
 
     Scalars only: passing arrays into helpers makes numba reference-count them,
     which costs more than the physics here. (q1, q2, q3) are
     NBW: (ρ, n, σ); Dahl: (σ, –, –); LuGre: (α, –, –); Bouc–Wen: (β₁, γ, n).
+    ``zn`` is |z|ⁿ when the caller has it (:func:`deriv_pow`), else negative.
     """
     if form == NBW:
-        zn = math.pow(abs(z), q2)
+        if zn < 0.0:
+            zn = math.pow(abs(z), q2)
         return q1 * (w - q3 * abs(w) * _sgn(z) * zn + (q3 - 1.0) * w * zn)
     if form == DAHL:
         return q1 * w * (1.0 - z * _sgn(w))
     if form == LUGRE:
         return w - q1 * abs(w) * z
-    rn = math.pow(abs(z), q3)
+    rn = math.pow(abs(z), q3) if zn < 0.0 else zn
     return w - q1 * abs(w) * _sgn(z) * rn - q2 * w * rn
 
 
@@ -144,7 +146,30 @@ def deriv(lay, cst, p, t, a, s, ds):
         Damper force [N] (the hysteretic part of f_r, with preload and
         voltage-dependent viscous term when those effects are on).
     """
-    return _state_rates(lay, cst, p, t, a, s, ds, True)
+    return _state_rates(lay, cst, p, t, a, s, ds, True, -1.0)
+
+
+@hot
+def deriv_pow(lay, cst, p, t, a, s, ds, zn):
+    """:func:`deriv` with the power |z|ⁿ of the hysteretic rate given: ``zn`` = |s[iz]|^p[ip] for
+    (iz, ip) = :func:`power_slot` (unused by forms without one).
+
+    A caller with many states to evaluate computes their powers together, in
+    one loop the compiler vectorises (:func:`bayes_mr.models.power.pow_nonneg`),
+    instead of one C-library call per state (:func:`bayes_mr.models.integrate.advance_points`).
+    """
+    return _state_rates(lay, cst, p, t, a, s, ds, True, zn)
+
+
+@hot(inline="always")
+def power_slot(lay):
+    """(index of the state z, index of the parameter n) of the form's |z|ⁿ; (-1, -1) for Dahl and LuGre."""
+    form = lay[L_FORM]
+    if form == NBW or form == BW:
+        return lay[L_SFORM], lay[L_PFORM] + 4
+    if form == SPENCER:
+        return lay[L_SFORM] + 1, lay[L_PFORM] + 12  # _spencer's n
+    return -1, -1
 
 
 @hot
@@ -155,12 +180,13 @@ def forces(lay, cst, p, t, a, s, ds):
     Bouc–Wen family's ż is most of a right-hand side's cost and no force
     needs it (LuGre's force holds ε ż, so there it is computed).
     """
-    return _state_rates(lay, cst, p, t, a, s, ds, False)
+    return _state_rates(lay, cst, p, t, a, s, ds, False, -1.0)
 
 
 @hot(inline="always")
-def _state_rates(lay, cst, p, t, a, s, ds, rates):
-    """:func:`deriv` (``rates`` True) or :func:`forces` (False; ``ds``'s hysteretic entries left unset)."""
+def _state_rates(lay, cst, p, t, a, s, ds, rates, zn):
+    """:func:`deriv` (``rates`` True) or :func:`forces` (False; ``ds``'s hysteretic entries left unset);
+    ``zn``: |z|ⁿ if the caller has it (:func:`deriv_pow`), else negative."""
     form = lay[L_FORM]
     kind = lay[L_KIND]
     if kind != DEVICE:
@@ -221,7 +247,8 @@ def _state_rates(lay, cst, p, t, a, s, ds, rates):
         r = xd - yd
         ds[i] = yd
         if rates:
-            zn = math.pow(abs(z), n)
+            if zn < 0.0:
+                zn = math.pow(abs(z), n)
             ds[i + 1] = -gam * abs(r) * _sgn(z) * zn - bet * r * zn + A * r
         f_d = c1 * yd + m_k * (k1 * x - f_pre)
         jf = lay[L_PFRAME]
@@ -246,7 +273,7 @@ def _state_rates(lay, cst, p, t, a, s, ds, rates):
         if lay[L_LVR] >= 0:
             # series dashpot c_s: the hysteretic element moves at ẋ − F/c_s
             w = xd - f_s / p[lay[L_LVR]]
-        zd = _zdot(form, w, z, q1, q2, q3) if rates or form == LUGRE else 0.0
+        zd = _zdot(form, w, z, q1, q2, q3, zn) if rates or form == LUGRE else 0.0
         ds[i] = zd
         f_d = f_s
         if form == LUGRE:
