@@ -74,16 +74,15 @@ def sigma_points(m, P, S, Pj, X, spread, L):
 @hot(inline="always")
 def _about_central(A, nsig, n, wi, m, dm, D):
     """Deviations D[i] = A[i] − A[0] (i ≥ 1), δ = wi Σ D[i] into dm, and the mean m = A[0] + δ (n columns)."""
-    for q in range(n):
-        dm[q] = 0.0
-    for i in range(1, nsig):
-        for q in range(n):
-            v = A[i, q] - A[0, q]
+    for q in range(n):  # a column at a time, its sum in a register (summed in ascending i, as the formula reads)
+        a0 = A[0, q]
+        acc = 0.0
+        for i in range(1, nsig):
+            v = A[i, q] - a0
             D[i, q] = v
-            dm[q] += v
-    for q in range(n):
-        dm[q] *= wi
-        m[q] = A[0, q] + dm[q]
+            acc += v
+        dm[q] = acc * wi
+        m[q] = a0 + dm[q]
 
 
 @hot(inline="always")
@@ -114,13 +113,10 @@ def moments(A, B, nsig, na, nb, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, 
         _about_central(A, nsig, na, wi, ma, da, DA)
         if not same:
             _about_central(B, nsig, nb, wi, mb, db, DB)
+        _products(DA, DB, 1, nsig, na, nb, 1.0, Pab, True, same)
         for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = 0.0
-                for i in range(1, nsig):
-                    acc += DA[i, q] * DB[i, r]
-                v = wi * acc + ab * da[q] * db[r]
+            for r in range(q + 1 if same else nb):
+                v = wi * Pab[q, r] + ab * da[q] * db[r]
                 Pab[q, r] = v
                 if same:
                     Pab[r, q] = v
@@ -134,15 +130,80 @@ def moments(A, B, nsig, na, nb, w0m, w0c, wi, ab, central, ma, mb, Pab, da, db, 
             if not same:
                 for q in range(nb):
                     DB[i, q] = B[i, q] - mb[q]
-        for q in range(na):
-            top = q + 1 if same else nb
-            for r in range(top):
-                acc = w0c * DA[0, q] * DB[0, r]
-                for i in range(1, nsig):
-                    acc += wi * DA[i, q] * DB[i, r]
-                Pab[q, r] = acc
-                if same:
-                    Pab[r, q] = acc
+        _products(DA, DB, 0, 1, na, nb, w0c, Pab, True, same)
+        _products(DA, DB, 1, nsig, na, nb, wi, Pab, False, same)
+        if same:
+            for q in range(na):
+                for r in range(q):
+                    Pab[r, q] = Pab[q, r]
+
+
+@hot(inline="always")
+def _products(DA, DB, i0, i1, na, nb, w, Pab, first, tri):
+    """Pab[q, r] (+)= Σ_{i0 ≤ i < i1} w·DA[i, q]·DB[i, r] for r < nb (r ≤ q: ``tri``), every entry summed in
+    ascending i (``first``: from 0, else from Pab's value).
+
+    Four entries at a time in four accumulators — along a row, or down a column where rows are shorter than four
+    (a cross-covariance with one or two measured channels): four independent chains of additions the processor
+    overlaps and the compiler packs, where one entry at a time is one chain of dependent additions. Each entry adds
+    the same terms in the same order, so the numbers are those of the entry-by-entry sum."""
+    if not tri and nb < 4:
+        for r in range(nb):
+            q = 0
+            while q + 4 <= na:
+                a0, a1, a2, a3 = _start4(Pab, q, r, 1, 0, first)
+                for i in range(i0, i1):
+                    b = DB[i, r]
+                    a0 += (w * DA[i, q]) * b
+                    a1 += (w * DA[i, q + 1]) * b
+                    a2 += (w * DA[i, q + 2]) * b
+                    a3 += (w * DA[i, q + 3]) * b
+                _store4(Pab, q, r, 1, 0, a0, a1, a2, a3)
+                q += 4
+            for qq in range(q, na):
+                _one(DA, DB, i0, i1, qq, r, w, Pab, first)
+        return
+    for q in range(na):
+        top = q + 1 if tri else nb
+        r = 0
+        while r + 4 <= top:
+            a0, a1, a2, a3 = _start4(Pab, q, r, 0, 1, first)
+            for i in range(i0, i1):
+                wq = w * DA[i, q]
+                a0 += wq * DB[i, r]
+                a1 += wq * DB[i, r + 1]
+                a2 += wq * DB[i, r + 2]
+                a3 += wq * DB[i, r + 3]
+            _store4(Pab, q, r, 0, 1, a0, a1, a2, a3)
+            r += 4
+        for rr in range(r, top):
+            _one(DA, DB, i0, i1, q, rr, w, Pab, first)
+
+
+@hot(inline="always")
+def _start4(Pab, q, r, dq, dr, first):
+    """The four accumulators of Pab[q + k·dq, r + k·dr] (k < 4): 0, or their values to add to."""
+    if first:
+        return 0.0, 0.0, 0.0, 0.0
+    return Pab[q, r], Pab[q + dq, r + dr], Pab[q + 2 * dq, r + 2 * dr], Pab[q + 3 * dq, r + 3 * dr]
+
+
+@hot(inline="always")
+def _store4(Pab, q, r, dq, dr, a0, a1, a2, a3):
+    """Pab[q + k·dq, r + k·dr] ← a_k (k < 4)."""
+    Pab[q, r] = a0
+    Pab[q + dq, r + dr] = a1
+    Pab[q + 2 * dq, r + 2 * dr] = a2
+    Pab[q + 3 * dq, r + 3 * dr] = a3
+
+
+@hot(inline="always")
+def _one(DA, DB, i0, i1, q, r, w, Pab, first):
+    """Pab[q, r] (+)= Σ_{i0 ≤ i < i1} w·DA[i, q]·DB[i, r], summed in ascending i."""
+    acc = 0.0 if first else Pab[q, r]
+    for i in range(i0, i1):
+        acc += (w * DA[i, q]) * DB[i, r]
+    Pab[q, r] = acc
 
 
 @hot(inline="always")
@@ -178,7 +239,7 @@ def sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns
         lo, hi, mq = phi_lo[j], phi_hi[j], m[ns + j]
         centre = _coord(c, min(max(mq, lo), hi))
         TH[0, k] = centre / sc
-        em = math.exp(mq) if c == 1 and lo <= mq <= hi else 0.0
+        em = centre if c == 1 and lo <= mq <= hi else 0.0  # exp(mq): the centre's own θ·scale, not a second exp
         for i in range(L):
             d = spread * S[q, i]
             if d == 0.0:

@@ -224,3 +224,74 @@ def test_sigma_point_parameters_equal_each_point_mapped_on_its_own():
         want = np.tile(tmpl, (2 * L + 1, 1))
         want[:, free_idx] = v
         np.testing.assert_allclose(TH, want, rtol=1e-14, atol=0)
+
+
+def _moments_entry_by_entry(A, B, w0c, wi, ab, central):
+    """The unscented means and cross-covariance of the rows of A and B, each entry one sum in ascending point order
+    (written independently of the kernel, in its arithmetic: the reference its blocked sums must equal exactly)."""
+    nsig, na, nb = A.shape[0], A.shape[1], B.shape[1]
+    if central:
+        DA, DB = A[1:] - A[0], B[1:] - B[0]
+        da = _raw_mean(np.vstack([np.zeros(na), DA]), 0.0, 1.0) * wi  # 0·0 + ΣΔ in order, then × wi
+        db = _raw_mean(np.vstack([np.zeros(nb), DB]), 0.0, 1.0) * wi
+        P = np.empty((na, nb))
+        for q in range(na):
+            for r in range(nb):
+                acc = 0.0
+                for i in range(nsig - 1):
+                    acc += DA[i, q] * DB[i, r]
+                P[q, r] = wi * acc + ab * da[q] * db[r]
+        return A[0] + da, B[0] + db, P
+    w0m = 1.0 - (nsig - 1) * wi
+    ma, mb = _raw_mean(A, w0m, wi), _raw_mean(B, w0m, wi)
+    DA, DB = A - ma, B - mb
+    P = np.empty((na, nb))
+    for q in range(na):
+        for r in range(nb):
+            acc = w0c * DA[0, q] * DB[0, r]
+            for i in range(1, nsig):
+                acc += wi * DA[i, q] * DB[i, r]
+            P[q, r] = acc
+    return ma, mb, P
+
+
+def _raw_mean(A, w0m, wi):
+    """w0m·A[0] + wi·A[1] + wi·A[2] + …, column by column, summed in that order."""
+    m = np.empty(A.shape[1])
+    for q in range(A.shape[1]):
+        acc = w0m * A[0, q]
+        for i in range(1, A.shape[0]):
+            acc += wi * A[i, q]
+        m[q] = acc
+    return m
+
+
+@pytest.mark.parametrize("central", [True, False])
+def test_moments_equal_the_entry_by_entry_sums_bit_for_bit(central):
+    """The kernel's blocked sums (four entries at a time, along rows or down columns) add each entry's terms in the
+    same order as one sum per entry: the same numbers exactly, for state sizes 1-11 and 1-3 channels, the
+    covariance of a set with itself (lower triangle mirrored) and the cross-covariance with another."""
+    rng = np.random.default_rng(8)
+    for trial in range(60):
+        L, ny = int(rng.integers(1, 12)), int(rng.integers(1, 4))
+        nsig = 2 * L + 1
+        A = rng.standard_normal((nsig, L)) * 10.0 ** rng.uniform(-4, 4, L)
+        B = rng.standard_normal((nsig, ny))
+        wi, ab, w0c = rng.uniform(0.01, 0.1), rng.uniform(0.0, 3.0), rng.uniform(-1.0, 2.0)
+        w0m = 1.0 - (nsig - 1) * wi
+        for other in (A, B):
+            same = other is A
+            nb = other.shape[1]
+            ma, mb, da, db = np.zeros(L), np.zeros(nb), np.zeros(L), np.zeros(nb)
+            DA, DB = np.zeros((nsig, L)), np.zeros((nsig, nb))
+            P = np.full((L, nb), np.nan)
+            if same:
+                U.moments(A, A, nsig, L, L, w0m, w0c, wi, ab, central, ma, ma, P, da, da, True, DA, DA)
+            else:
+                U.moments(A, B, nsig, L, nb, w0m, w0c, wi, ab, central, ma, mb, P, da, db, False, DA, DB)
+            want_a, want_b, want_p = _moments_entry_by_entry(A, other, w0c, wi, ab, central)
+            np.testing.assert_array_equal(ma, want_a)
+            if not same:
+                np.testing.assert_array_equal(mb, want_b)
+            want_p = np.tril(want_p) + np.tril(want_p, -1).T if same else want_p  # the lower triangle, mirrored
+            np.testing.assert_array_equal(P, want_p)
