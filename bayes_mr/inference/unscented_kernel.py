@@ -143,7 +143,7 @@ def _products(DA, DB, i0, i1, na, nb, w, Pab, first, tri):
     """Pab[q, r] (+)= Σ_{i0 ≤ i < i1} w·DA[i, q]·DB[i, r] for r < nb (r ≤ q: ``tri``), every entry summed in
     ascending i (``first``: from 0, else from Pab's value).
 
-    Four entries at a time in four accumulators — along a row, or down a column where rows are shorter than four
+    Four entries at a time (:func:`_block4`) — along a row, or down a column where rows are shorter than four
     (a cross-covariance with one or two measured channels): four independent chains of additions the processor
     overlaps and the compiler packs, where one entry at a time is one chain of dependent additions. Each entry adds
     the same terms in the same order, so the numbers are those of the entry-by-entry sum."""
@@ -151,14 +151,7 @@ def _products(DA, DB, i0, i1, na, nb, w, Pab, first, tri):
         for r in range(nb):
             q = 0
             while q + 4 <= na:
-                a0, a1, a2, a3 = _start4(Pab, q, r, 1, 0, first)
-                for i in range(i0, i1):
-                    b = DB[i, r]
-                    a0 += (w * DA[i, q]) * b
-                    a1 += (w * DA[i, q + 1]) * b
-                    a2 += (w * DA[i, q + 2]) * b
-                    a3 += (w * DA[i, q + 3]) * b
-                _store4(Pab, q, r, 1, 0, a0, a1, a2, a3)
+                _block4(DA, DB, i0, i1, q, r, 1, 0, w, Pab, first)
                 q += 4
             for qq in range(q, na):
                 _one(DA, DB, i0, i1, qq, r, w, Pab, first)
@@ -167,30 +160,24 @@ def _products(DA, DB, i0, i1, na, nb, w, Pab, first, tri):
         top = q + 1 if tri else nb
         r = 0
         while r + 4 <= top:
-            a0, a1, a2, a3 = _start4(Pab, q, r, 0, 1, first)
-            for i in range(i0, i1):
-                wq = w * DA[i, q]
-                a0 += wq * DB[i, r]
-                a1 += wq * DB[i, r + 1]
-                a2 += wq * DB[i, r + 2]
-                a3 += wq * DB[i, r + 3]
-            _store4(Pab, q, r, 0, 1, a0, a1, a2, a3)
+            _block4(DA, DB, i0, i1, q, r, 0, 1, w, Pab, first)
             r += 4
         for rr in range(r, top):
             _one(DA, DB, i0, i1, q, rr, w, Pab, first)
 
 
 @hot(inline="always")
-def _start4(Pab, q, r, dq, dr, first):
-    """The four accumulators of Pab[q + k·dq, r + k·dr] (k < 4): 0, or their values to add to."""
+def _block4(DA, DB, i0, i1, q, r, dq, dr, w, Pab, first):
+    """The entries Pab[q + k·dq, r + k·dr] (k < 4) as :func:`_one` sums each, in four accumulators at once."""
     if first:
-        return 0.0, 0.0, 0.0, 0.0
-    return Pab[q, r], Pab[q + dq, r + dr], Pab[q + 2 * dq, r + 2 * dr], Pab[q + 3 * dq, r + 3 * dr]
-
-
-@hot(inline="always")
-def _store4(Pab, q, r, dq, dr, a0, a1, a2, a3):
-    """Pab[q + k·dq, r + k·dr] ← a_k (k < 4)."""
+        a0 = a1 = a2 = a3 = 0.0
+    else:
+        a0, a1, a2, a3 = Pab[q, r], Pab[q + dq, r + dr], Pab[q + 2 * dq, r + 2 * dr], Pab[q + 3 * dq, r + 3 * dr]
+    for i in range(i0, i1):
+        a0 += (w * DA[i, q]) * DB[i, r]
+        a1 += (w * DA[i, q + dq]) * DB[i, r + dr]
+        a2 += (w * DA[i, q + 2 * dq]) * DB[i, r + 2 * dr]
+        a3 += (w * DA[i, q + 3 * dq]) * DB[i, r + 3 * dr]
     Pab[q, r] = a0
     Pab[q + dq, r + dr] = a1
     Pab[q + 2 * dq, r + 2 * dr] = a2
