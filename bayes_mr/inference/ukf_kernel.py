@@ -30,7 +30,7 @@ from .._jit import driver, hot
 from ..models.integrate import DECIDE, advance, advance_points, substeps, work_shape
 from ..models.kernel import DEVICE, L_KIND, L_NS, L_OBS, LAYOUT_SIZE, channel, deriv, deriv_pow, forces, rate
 from ..models.power import point_powers
-from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas
+from .unscented_kernel import cholesky, moments, sigma_points, sigma_thetas, thetas_scratch
 
 # status codes of a run
 OK = 0
@@ -88,7 +88,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     """
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
     w0m, w0c, wi, spread, ab, central = weights
-    S, Pj, X, TH, d, DX = sig
+    S, Pj, X, TH, d, DX, ED = sig
     K1, work, stages, taken, pw = pbuf
     ns = lay[L_NS]
     L = lay[U_L]
@@ -97,7 +97,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     if jit < 0:
         return CHOL_FAILED, 0, 0
     lam = 0.0
-    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH)
+    sigma_thetas(free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH, ED)
     for i in range(nsig):
         taken[i] = False
     point_powers(lay, TH, X, K1, stages, 0, 0.0, nsig, taken, pw)  # every point's |z|ⁿ at once (vectorised)
@@ -134,7 +134,7 @@ def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     """
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
     w0m, w0c, wi, spread, ab, central = weights
-    S, Pj, X, TH, d, DX = sig
+    S, Pj, X, TH, d, DX, ED = sig
     Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY = ubuf
     ns = lay[L_NS]
     L = lay[U_L]
@@ -144,7 +144,7 @@ def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     jit = sigma_points(m, P, S, Pj, X, spread, L)
     if jit < 0:
         return CHOL_FAILED, 0, 0.0
-    sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH)
+    sigma_thetas(free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH, ED)
     for i in range(nsig):
         observe(lay, cst, TH[i], t1, a1, X[i, :ns], dsbuf, Y[i], ny)
         for q in range(ny):
@@ -359,6 +359,8 @@ def ukf_run(
     Pj = np.zeros((L, L))
     X = np.zeros((nsig, L))
     TH = np.zeros((nsig, nfull))
+    for i in range(nsig):  # the fixed parameters' θ, once: sigma_thetas writes the free ones
+        TH[i] = tmpl
     K1 = np.zeros((nsig, ns))
     Y = np.zeros((nsig, ny))
     work = np.zeros(work_shape(ns))
@@ -377,6 +379,7 @@ def ukf_run(
     nu = np.zeros(ny)
     z = np.zeros(ny)
     DX = np.zeros((nsig, L))
+    ED = np.zeros(thetas_scratch(ns, L))
     DY = np.zeros((nsig, ny))
     P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
@@ -385,7 +388,7 @@ def ukf_run(
         (m, P, Q, R),
         (w0m, w0c, wi, spread, ab, central),
         (stride, hist_m, hist_sd, states_m, store_states, info),
-        (S, Pj, X, TH, d, DX),
+        (S, Pj, X, TH, d, DX, ED),
         (K1, work, stages, taken, pw),
         (Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY),
         P0s,

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 from .._jit import hot
+from ..models.power import exp_dd
 
 
 @hot
@@ -203,41 +204,55 @@ def _coord(c, v):
     return v
 
 
+@hot(inline="always")
+def thetas_scratch(ns, L):
+    """Shape of :func:`sigma_thetas`' scratch: 2 × the free parameters' rows of the factor ((L − ns)·L entries),
+    padded to a multiple of the vector width (8; the padding's exp(0) is unused)."""
+    return 2, ((L - ns) * L + 7) // 8 * 8
+
+
 @hot
-def sigma_thetas(tmpl, free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH):
-    """TH[i] ← θ of every sigma point m, m ± spread·S[:, i] (each row of X clipped to the box [phi_lo, phi_hi] and mapped to θ).
+def sigma_thetas(free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, TH, ED):
+    """TH[i] ← θ of the free parameters at every sigma point m, m ± spread·S[:, i] (clipped to the box, mapped to θ).
 
     A log coordinate's pair of points costs one exponential, not two:
-    exp(m ± d) = exp(m)·exp(±d) (d = spread·S[q, i]), and a column of the
-    lower-triangular factor that is zero in a parameter's row leaves that
-    parameter at the centre's value. Where m ± d leaves the box the point is
-    clipped and evaluated directly. The product
-    differs from exp(m + d) by rounding only (≤ 2 ulp): per sample that is
-    ~60 of the ~120 exponentials of a dahl filter step (4 parameters, 15
-    sigma points, predicted and updated). ``L`` is the augmented state's size
-    (``ns`` model states and L − ns free parameters).
+    exp(m ± d)/scale = (exp(m)/scale)·exp(±d) (d = spread·S[q, i]), and the
+    exponentials of every parameter's deviations are taken in one loop of
+    :func:`~bayes_mr.models.power.exp_dd` that the compiler vectorises (into
+    ``ED``, scratch of shape :func:`thetas_scratch`), where one C-library
+    call each ran one after another: ~45 exponentials per call, twice per
+    filter step (normalized-bouc-wen on signal I, batched over 100 priors:
+    1.84 → 1.45 µs per run and sample, one bench run each). The lower
+    point divides by exp(d) once. A column of the lower-triangular factor
+    that is zero in a parameter's row leaves that parameter at the centre's
+    value; where m ± d leaves the box the point is clipped and evaluated
+    directly. The products differ from exp(m ± d)/scale by rounding only
+    (≤ 3 ulp: exp(d) within 1 ulp, three roundings). ``L`` is the augmented
+    state's size (``ns`` model states and L − ns free parameters). The
+    fixed parameters' columns of TH are left alone: the filter fills them
+    with their θ once per run.
     """
-    nsig = 2 * L + 1
-    for i in range(nsig):
-        for q in range(tmpl.shape[0]):
-            TH[i, q] = tmpl[q]
+    for j in range(L - ns):  # the arguments, then one flat loop over a multiple of the vector width
+        for i in range(L):
+            ED[1, j * L + i] = spread * S[ns + j, i]
+    for e in range(ED.shape[1]):
+        ED[0, e] = exp_dd(ED[1, e])
     for j in range(L - ns):
         q, c, k, sc = ns + j, is_log[j], free_idx[j], scale[j]
         lo, hi, mq = phi_lo[j], phi_hi[j], m[ns + j]
-        centre = _coord(c, min(max(mq, lo), hi))
-        TH[0, k] = centre / sc
-        em = centre if c == 1 and lo <= mq <= hi else 0.0  # exp(mq): the centre's own θ·scale, not a second exp
+        centre = _coord(c, min(max(mq, lo), hi)) / sc
+        TH[0, k] = centre
+        inside = c == 1 and lo <= mq <= hi and centre > 0.0  # exp(mq)/scale: the centre's own θ, not a second exp
         for i in range(L):
             d = spread * S[q, i]
             if d == 0.0:
-                TH[1 + i, k] = TH[0, k]
-                TH[1 + L + i, k] = TH[0, k]
+                TH[1 + i, k] = centre
+                TH[1 + L + i, k] = centre
                 continue
             up, dn = mq + d, mq - d
-            if em > 0.0 and lo <= up <= hi and lo <= dn <= hi:
-                ed = math.exp(d)
-                TH[1 + i, k] = em * ed / sc
-                TH[1 + L + i, k] = em / ed / sc
+            if inside and lo <= up <= hi and lo <= dn <= hi:
+                TH[1 + i, k] = centre * ED[0, j * L + i]
+                TH[1 + L + i, k] = centre / ED[0, j * L + i]
             else:
                 TH[1 + i, k] = _coord(c, min(max(up, lo), hi)) / sc
                 TH[1 + L + i, k] = _coord(c, min(max(dn, lo), hi)) / sc

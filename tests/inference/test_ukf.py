@@ -217,8 +217,8 @@ def test_sigma_point_parameters_equal_each_point_mapped_on_its_own():
         S, Pj, X = np.zeros((L, L)), np.zeros((L, L)), np.zeros((2 * L + 1, L))
         spread = 2.6
         assert U.sigma_points(m, P, S, Pj, X, spread, L) == 0
-        TH = np.zeros((2 * L + 1, tmpl.size))
-        U.sigma_thetas(tmpl, free_idx, is_log, scale, lo, hi, m, S, spread, ns, L, TH)
+        TH = np.tile(tmpl, (2 * L + 1, 1))  # the fixed parameters' columns, which sigma_thetas leaves alone
+        U.sigma_thetas(free_idx, is_log, scale, lo, hi, m, S, spread, ns, L, TH, np.zeros(U.thetas_scratch(ns, L)))
         phi = np.clip(X[:, ns:], lo, hi)
         v = np.where(is_log == 1, np.exp(phi), np.where(is_log == 2, np.sinh(phi), phi)) / scale
         want = np.tile(tmpl, (2 * L + 1, 1))
