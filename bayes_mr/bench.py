@@ -153,9 +153,8 @@ def _time_filterpy(problem, prior, settings, fx, hx, n: int, ours_states: np.nda
         f.predict(t=k * h, a0=rows[k], a1=rows[k + 1])
         f.update(y[k + 1], t=(k + 1) * h, a=rows[k + 1])
         if ours_states is not None:  # outside the timed region would need a second pass; it is cheap
-            d = float((np.abs(ours_states[k + 1] - f.x) / np.sqrt(np.diag(f.P))).max())
-            if diff == diff and not d <= diff:  # keep a NaN: max(0.0, nan) is 0.0
-                diff = d
+            d = np.abs(ours_states[k + 1] - f.x) / np.sqrt(np.diag(f.P))
+            diff = float(np.maximum(diff, d.max()))  # a NaN stays NaN (Python's max(0.0, nan) is 0.0)
     return (_time.perf_counter() - t0) / n * 1e6, diff
 
 

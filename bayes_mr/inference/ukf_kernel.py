@@ -86,7 +86,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
     definite after jitter; nothing else done) or NON_FINITE (a propagated
     state is not finite); jitter 1 if P needed it; the RK4 sub-steps used.
     """
-    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
+    lay, cst, free_idx, is_log, scale, phi_lo, phi_hi = model
     w0m, w0c, wi, spread, ab, central = weights
     S, Pj, X, TH, d, DX, ED = sig
     K1, work, stages, taken, pw = pbuf
@@ -132,7 +132,7 @@ def _update(model, weights, sig, ubuf, m, P, R, y, a1, t1):
     NON_FINITE (a predicted measurement is not finite) or INNOVATION_NOT_PD;
     the increment ln N(y; ŷ⁻, P_yy) is meaningful only when OK.
     """
-    lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi = model
+    lay, cst, free_idx, is_log, scale, phi_lo, phi_hi = model
     w0m, w0c, wi, spread, ab, central = weights
     S, Pj, X, TH, d, DX, ED = sig
     Y, dsbuf, mx, dy, yhat, Pyy, Syy, Pxy, Kg, nu, z, DY = ubuf
@@ -205,7 +205,7 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
     """The filter loop proper (no allocation; see :func:`ukf_run`).
 
     The arguments are tuples in the order :func:`ukf_run` builds them:
-    ``model`` (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+    ``model`` (lay, cst, free_idx, is_log, scale, phi_lo, phi_hi),
     ``record`` (h, inputs, yobs, valid, reset), ``state`` (m, P, Q, R),
     ``weights`` (w0m, w0c, wi, spread, ab, central), ``out`` (stride, hist_m,
     hist_sd, states_m, store_states, info); ``sig``, ``pbuf``, ``ubuf`` are
@@ -222,7 +222,7 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
     covariance), time restarts at 0, and there is no transition (and no
     update) from sample k−1 to k. φ and its covariance carry over.
     """
-    lay, phi_lo, phi_hi = model[0], model[6], model[7]
+    lay, _, _, _, _, phi_lo, phi_hi = model
     h, inputs, yobs, valid, reset = record
     m, P, Q, R = state
     stride, hist_m, hist_sd, states_m, store_states, info = out
@@ -383,7 +383,7 @@ def ukf_run(
     DY = np.zeros((nsig, ny))
     P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
-        (lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi),
+        (lay, cst, free_idx, is_log, scale, phi_lo, phi_hi),  # tmpl is in TH's fixed columns already
         (h, inputs, yobs, valid, reset),
         (m, P, Q, R),
         (w0m, w0c, wi, spread, ab, central),

@@ -238,13 +238,13 @@ def sigma_thetas(free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, T
     for e in range(ED.shape[1]):
         ED[0, e] = exp_dd(ED[1, e])
     for j in range(L - ns):
-        q, c, k, sc = ns + j, is_log[j], free_idx[j], scale[j]
+        c, k, sc = is_log[j], free_idx[j], scale[j]
         lo, hi, mq = phi_lo[j], phi_hi[j], m[ns + j]
         centre = _coord(c, min(max(mq, lo), hi)) / sc
         TH[0, k] = centre
         inside = c == 1 and lo <= mq <= hi and centre > 0.0  # exp(mq)/scale: the centre's own θ, not a second exp
         for i in range(L):
-            d = spread * S[q, i]
+            d = ED[1, j * L + i]  # spread·S[q, i]
             if d == 0.0:
                 TH[1 + i, k] = centre
                 TH[1 + L + i, k] = centre
