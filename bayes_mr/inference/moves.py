@@ -34,11 +34,21 @@ class Snooker(emcee.moves.DESnookerMove):
 
 def jittered_cholesky(cov) -> np.ndarray:
     """Lower Cholesky factor of the symmetrised ``cov`` with a 1e-12 relative jitter on the diagonal,
-    so that a singular covariance (an unidentified direction) stays drawable."""
+    so that a singular covariance (an unidentified direction) stays drawable.
+
+    A covariance built on a pseudo-inverse can carry eigenvalues a rounding error below zero, more than the
+    jitter covers (spencer's least-squares covariance on the packaged damper: Cholesky failed); its
+    eigenvalues are then raised to the jitter (the nearest positive-definite matrix in that sense).
+    """
     cov = np.atleast_2d(np.asarray(cov, float))
     d = cov.shape[0]
     jitter = 1e-12 * max(float(np.trace(cov)) / d, 1e-300)
-    return np.linalg.cholesky(0.5 * (cov + cov.T) + jitter * np.eye(d))
+    sym = 0.5 * (cov + cov.T)
+    try:
+        return np.linalg.cholesky(sym + jitter * np.eye(d))
+    except np.linalg.LinAlgError:
+        w, u = np.linalg.eigh(sym)
+        return np.linalg.cholesky((u * np.maximum(w, jitter)) @ u.T + jitter * np.eye(d))
 
 
 class Independence(emcee.moves.MHMove):

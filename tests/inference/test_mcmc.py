@@ -395,6 +395,22 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
     assert over_budget("ValueError: OverBudget: no") is None and over_budget(None) is None
 
 
+def test_a_covariance_a_rounding_error_from_definite_is_still_drawn():
+    """A pseudo-inverse covariance whose smallest eigenvalue is slightly negative (beyond the 1e-12 jitter)
+    still gives a lower factor; a definite one keeps its plain Cholesky factor."""
+    from bayes_mr.inference.moves import jittered_cholesky
+
+    u = np.linalg.qr(np.random.default_rng(0).standard_normal((4, 4)))[0]
+    cov = (u * np.array([4.0, 1.0, 1e-3, -1e-9])) @ u.T
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(cov + 1e-12 * np.trace(cov) / 4 * np.eye(4))
+    L = jittered_cholesky(cov)
+    assert np.allclose(np.tril(L), L) and np.all(np.diag(L) > 0)
+    np.testing.assert_allclose(L @ L.T, cov, atol=1e-8)
+    good = (u * np.array([4.0, 1.0, 1e-3, 1e-4])) @ u.T
+    np.testing.assert_allclose(jittered_cholesky(good), np.linalg.cholesky(good), rtol=1e-7, atol=1e-12)
+
+
 def _piled_target():
     """A 2-d target piled against the box's lower bound in x₀: p ∝ exp(−x₀ − ½(x₁ − ½x₀)²) on [0, 30] × [−30, 30].
 
