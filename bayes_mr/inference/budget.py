@@ -37,6 +37,10 @@ def over_budget(error: str | None) -> str | None:
 def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int, max_seconds: float) -> float:
     """Seconds of one ensemble step at ``center``; raise :class:`OverBudget` if the run cannot fit.
 
+    The ensemble is evaluated twice and the second call timed: the first may compile the walkers' batched kernel
+    (a fresh machine, or a kernel the least-squares fit did not use), which the chain pays once, not at every
+    step; a projection from it could refuse a posterior that fits its budget.
+
     Parameters
     ----------
     log_prob : callable
@@ -62,6 +66,7 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
         When (``pilot_steps`` + :data:`MIN_CHAIN_STEPS`) steps at that cost exceed ``max_seconds``.
     """
     x = np.repeat(np.atleast_2d(np.asarray(center, float)), n_walkers, axis=0)
+    log_prob(x)  # may compile the batched kernel: not a step's cost
     t0 = _time.perf_counter()
     log_prob(x)
     step = _time.perf_counter() - t0
