@@ -47,9 +47,10 @@ def _points(model, kind, cst, rng, n_pts, t):
 @pytest.mark.parametrize("name", [*FORMS, *WITH_EFFECTS])
 def test_advance_points_equals_advance_of_each_point(name, kind):
     """With ROS2 tried (a device test's stiff intervals: n_sub above K_STIFF) and its error scale carried from
-    interval to interval in the shared scratch. Dahl and LuGre bit for bit; the Bouc–Wen family within 1e-13 of
+    interval to interval in the shared scratch. Dahl and LuGre bit for bit; the Bouc–Wen family within 1e-12 of
     the states' scale (a 1-ulp power through ≤ 8 RK4 sub-steps; mostly bit for bit still, as h·ż is far smaller
-    than z and an ulp of ż rarely reaches the sum)."""
+    than z and an ulp of ż rarely reaches the sum). Largest gap seen: 2.1e-13 on an AMD Zen 3 (AVX2) machine, whose
+    code for the vectorised power rounds otherwise than the AVX-512 machine where 1e-13 held."""
     model = get_model(name)
     cst = model.constants(50.0)
     rng = np.random.default_rng(11)
@@ -86,7 +87,7 @@ def test_advance_points_equals_advance_of_each_point(name, kind):
             np.testing.assert_array_equal(np.isfinite(got), fin)
             scale = np.maximum(np.abs(np.where(fin, want, 0.0)).max(axis=0), 1e-300)
             gap = np.where(fin, np.abs(got - want), 0.0) / scale  # per state, in its scale
-            assert gap.max() <= 1e-13, f"largest difference {gap.max():.2e} of the state's scale"
+            assert gap.max() <= 1e-12, f"largest difference {gap.max():.2e} of the state's scale"
         else:
             np.testing.assert_array_equal(got, want)
         assert list(taken) == want_taken

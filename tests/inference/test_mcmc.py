@@ -43,9 +43,12 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
 
     |mean − truth|/MCSE < 2.88 in every coordinate (MCSE = SD/√ESS; family-wise 2 % over the five
     for a calibrated MCSE — the next test checks that calibration over seeds), R-hat < 1.01,
-    and the second moment right too: E[(x−μ)ᵀP(x−μ)] = d within 3 MCSE
+    and the second moment right too: E[(x−μ)ᵀP(x−μ)] = d within 4 MCSE
     (a move that samples the wrong spread keeps the mean right — emcee
-    3.1.6's snooker does exactly that, see the snooker test).
+    3.1.6's snooker does exactly that, ~15 MCSE low, see the snooker test). Why 4 and not 3: that z is
+    calibrated (30 seeds on an AMD Zen 3 machine: mean −0.28, SD 1.06) and one seed's is a draw of it, so 3 MCSE
+    is a 0.3 % false alarm for each machine whose rounding moves the chain; seed 7 itself gave −3.48 there (it
+    passed on the machine the suite was written on).
     """
     mu, C, P, log_prob = correlated_gaussian(5, seed=1)
     res = sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=7, progress=False))
@@ -55,7 +58,7 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     z = (res.mean() - mu) / res.mcse()
     assert np.all(np.abs(z) < 2.88), z
     assert np.all(res.rhat < 1.01), res.rhat
-    assert abs(chi2_z(res, mu, P)) < 3.0
+    assert abs(chi2_z(res, mu, P)) < 4.0
     assert 0.15 < res.acceptance.mean() < 0.6
 
 
