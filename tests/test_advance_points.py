@@ -50,7 +50,7 @@ def test_advance_points_equals_advance_of_each_point(name, kind):
     interval to interval in the shared scratch. Dahl and LuGre bit for bit; the Bouc–Wen family within 1e-12 of
     the states' scale (a 1-ulp power through ≤ 8 RK4 sub-steps; mostly bit for bit still, as h·ż is far smaller
     than z and an ulp of ż rarely reaches the sum). Largest gap seen: 2.1e-13 on an AMD Zen 3 (AVX2) machine, whose
-    code for the vectorised power rounds otherwise than the AVX-512 machine where 1e-13 held."""
+    compiled power rounds otherwise than on the machine where 1e-13 held."""
     model = get_model(name)
     cst = model.constants(50.0)
     rng = np.random.default_rng(11)
