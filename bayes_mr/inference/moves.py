@@ -48,6 +48,7 @@ def jittered_cholesky(cov) -> np.ndarray:
         return np.linalg.cholesky(sym + jitter * np.eye(d))
     except np.linalg.LinAlgError:
         w, u = np.linalg.eigh(sym)
+        # the diagonal jitter again: the product U diag(w) Uᵀ rounds, and may round a floor-sized eigenvalue away
         return np.linalg.cholesky((u * np.maximum(w, jitter)) @ u.T + jitter * np.eye(d))
 
 
