@@ -447,7 +447,7 @@ def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
     piled_lo = rng.exponential(1.0, 4000)
     piled_hi = 10.0 - rng.exponential(0.5, 4000)
     out = fit_proposal(np.column_stack([gauss, piled_lo, piled_hi]), (lower, upper))
-    assert len(out) == 3 and list(out[2][2]) == [0, -1, 1]
+    assert len(out) == 4 and list(out[2][2]) == [0, -1, 1]
     assert not np.any(fit_proposal(gauss[:, None], (lower[:1], upper[:1]))[2][2])  # nothing moved: the plain fit
 
     half = rng.exponential(1.0, 4000)  # piled against 0
@@ -512,7 +512,8 @@ def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stay
     rng = np.random.default_rng(0)
     x0 = rng.exponential(1.0, 4000)
     draws = np.column_stack([x0, 0.5 * x0 + rng.standard_normal(4000)])
-    m_u, cov_u, edges = fit_proposal(draws, (lower, upper))
+    m_u, cov_u, edges, shear = fit_proposal(draws, (lower, upper))
+    assert shear is None  # a straight ridge: nothing to straighten
     assert list(edges[2]) == [-1, 0]
     off = (m_u + np.array([0.3, -0.3]), cov_u * 1.6)
     alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, edges),
