@@ -34,10 +34,9 @@ mean and covariance of its second half, frozen from then on (a fixed
 proposal keeps the chain exact), make the proposal — a coordinate piled
 against a bound of the box in log-distance to it where that fits the pilot
 jointly better (``bounds``; normalized-bouc-wen's n on the compare record:
-τ 10 → 5; :func:`~bayes_mr.inference.moves.fit_proposal`), a curved ridge straightened by a
-shear of unit Jacobian where that fits the pilot clearly better (:func:`~bayes_mr.inference.moves.fit_shear`),
-drawn only inside the
-box (a draw outside is drawn again: exact, and no evaluation is spent on a point the
+τ 10 → 5; :func:`~bayes_mr.inference.proposal.fit_proposal`), a non-Gaussian marginal mapped onto the
+normal's quantiles and a curved ridge straightened by a shear where either fits the pilot clearly better
+(:mod:`bayes_mr.inference.proposal`), drawn only inside the box (a draw outside is drawn again: exact, and no evaluation is spent on a point the
 prior rejects; normalized-bouc-wen on the packaged damper: 1300 → 850 steps) — and the
 chain proper starts from the pilot's last walkers (the pilot is not part of the result).
 Measured on the bench's dahl posterior (6-d, 24 walkers, 25 s at 1 kHz):
@@ -104,7 +103,8 @@ from ..synthetic_noise import as_seed_sequence
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged
-from .moves import MOVES, NEEDS_PROPOSAL, fit_proposal, local_moves
+from .moves import MOVES, NEEDS_PROPOSAL, local_moves
+from .proposal import fit_proposal
 from .walkers import LogDensity, start_walkers
 
 
@@ -198,7 +198,7 @@ class MCMCSettings:
     def make_moves(self, proposal: tuple | None = None) -> list:
         """Fresh emcee move objects (moves keep per-run state; never share them).
 
-        ``proposal`` is the (mean, cov[, edges[, shear]]) of the moves that need one (the independence move).
+        ``proposal`` is the (mean, cov[, map]) of the moves that need one (the independence move).
         """
         moves = []
         for name, w in self.moves:
@@ -251,7 +251,7 @@ def sample(
         The independence move's fixed proposal (:class:`~.moves.Independence`; default: fitted to a pilot).
     bounds : (ndarray (d,), ndarray (d,)), optional
         The support's box: initial walkers are drawn inside it (:func:`~.walkers.initial_walkers`), and the pilot's
-        proposal is fitted with it (:func:`~.moves.fit_proposal`).
+        proposal is fitted with it (:func:`~.proposal.fit_proposal`).
 
     Returns
     -------
@@ -311,7 +311,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     initial : ndarray (n_walkers, d)
         The last walkers before the chain proper (where it starts).
     proposal : tuple
-        (mean, cov, edges, shear) of :func:`~bayes_mr.inference.moves.fit_proposal`.
+        (mean, cov, map) of :func:`~bayes_mr.inference.proposal.fit_proposal`.
     pilot_steps : int
         Steps of the pilot and the rounds.
     acceptance : tuple of float

@@ -437,7 +437,7 @@ def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
     pilot better there. A Gaussian 2.5 SDs from its bound (inside EDGE_SDS) stays in x; marginals piled
     against either bound move; a piled marginal that moves in step with another coordinate (correlation
     0.99, as the Bouc–Wen benchmark's n with β₁ and γ) stays in x — alone it would move."""
-    from bayes_mr.inference.moves import EDGE_SDS, fit_proposal
+    from bayes_mr.inference.proposal import EDGE_SDS, fit_proposal
 
     rng = np.random.default_rng(1)
     lower, upper = np.zeros(3), np.full(3, 10.0)
@@ -447,15 +447,15 @@ def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
     piled_lo = rng.exponential(1.0, 4000)
     piled_hi = 10.0 - rng.exponential(0.5, 4000)
     out = fit_proposal(np.column_stack([gauss, piled_lo, piled_hi]), (lower, upper))
-    assert len(out) == 4 and list(out[2][2]) == [0, -1, 1]
-    assert not np.any(fit_proposal(gauss[:, None], (lower[:1], upper[:1]))[2][2])  # nothing moved: the plain fit
+    assert len(out) == 3 and list(out[2].side) == [0, -1, 1]
+    assert not np.any(fit_proposal(gauss[:, None], (lower[:1], upper[:1]))[2].side)  # nothing moved: the plain fit
 
     half = rng.exponential(1.0, 4000)  # piled against 0
     along = 2.0 * half + 0.2 * rng.standard_normal(4000)
     assert np.corrcoef(half, along)[0, 1] > 0.98
     box = (np.array([0.0, -30.0]), np.array([10.0, 30.0]))
-    assert not np.any(fit_proposal(np.column_stack([half, along]), box)[2][2])
-    assert list(fit_proposal(half[:, None], (box[0][:1], box[1][:1]))[2][2]) == [-1]
+    assert not np.any(fit_proposal(np.column_stack([half, along]), box)[2].side)
+    assert list(fit_proposal(half[:, None], (box[0][:1], box[1][:1]))[2].side) == [-1]
 
 
 def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
@@ -465,6 +465,7 @@ def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
     draw it would have placed outside, the target rejects. Seeds 0-4 pass; clipping the proposals into the box
     instead of drawing again (not exact: mass on the faces) fails every one of them on the means."""
     from bayes_mr.inference.moves import Independence
+    from bayes_mr.inference.proposal import ProposalMap
 
     mu, cov = np.array([0.85, 0.75]), np.array([[0.09, 0.05], [0.05, 0.09]])
     lower, upper = np.zeros(2), np.ones(2)
@@ -479,7 +480,7 @@ def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
     inside = np.all((exact >= lower) & (exact <= upper), axis=1)
     assert 0.55 < inside.mean() < 0.65
     exact = exact[inside]
-    edges = (lower, upper, np.zeros(2, int))
+    edges = ProposalMap(box=(lower, upper))
     runs = {}
     for label, proposal in (("box", (mu, cov, edges)), ("free", (mu, cov))):
         runs[label] = sample(log_prob, mu, cov * 0.1, proposal=proposal, bounds=(lower, upper),
@@ -506,15 +507,15 @@ def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stay
     variance of an exponential-tailed coordinate then has a relative MCSE of √(8/1600) ≈ 7 % — the band was
     two of them, and the BLAS kernel of another CPU (rounding only) moved seed 3 to −16 %. At 500 τ eight
     seeds stayed within ±8.4 %."""
-    from bayes_mr.inference.moves import fit_proposal
+    from bayes_mr.inference.proposal import fit_proposal
 
     log_prob, lower, upper, mean, var = _piled_target()
     rng = np.random.default_rng(0)
     x0 = rng.exponential(1.0, 4000)
     draws = np.column_stack([x0, 0.5 * x0 + rng.standard_normal(4000)])
-    m_u, cov_u, edges, shear = fit_proposal(draws, (lower, upper))
-    assert shear is None  # a straight ridge: nothing to straighten
-    assert list(edges[2]) == [-1, 0]
+    m_u, cov_u, edges = fit_proposal(draws, (lower, upper))
+    assert edges.shear is None  # a straight ridge: nothing to straighten
+    assert list(edges.side) == [-1, 0]
     off = (m_u + np.array([0.3, -0.3]), cov_u * 1.6)
     alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, edges),
                    settings=MCMCSettings(seed=3, progress=False, moves=(("independence", 1.0),), min_tau_multiple=500))

@@ -3,7 +3,8 @@
 import numpy as np
 
 from bayes_mr.inference.mcmc import MCMCSettings, sample
-from bayes_mr.inference.moves import SHEAR_MIN_GAIN, Independence, fit_proposal, fit_shear, sheared, unsheared
+from bayes_mr.inference.moves import Independence
+from bayes_mr.inference.proposal import SHEAR_MIN_GAIN, fit_proposal, fit_shear, sheared, unsheared
 
 #: x₁ ~ N(0, 1), x₂ | x₁ ~ N(B x₁², S²): a parabola-shaped ridge with exact moments
 #: E x₂ = B, Var x₂ = 2B² + S², Cov(x₁, x₂) = 0.
@@ -30,7 +31,7 @@ def test_fit_shear_finds_the_parabola_and_nothing_in_a_gaussian():
     assert np.allclose(unsheared(sheared(x, (centre, b)), (centre, b)), x, rtol=0, atol=1e-12)
     gauss = rng.multivariate_normal([0, 0, 0], [[1, 0.8, 0], [0.8, 1, 0.3], [0, 0.3, 1]], 4000)
     assert fit_shear(gauss) is None
-    assert fit_proposal(gauss)[3] is None
+    assert fit_proposal(gauss)[2].shear is None
 
 
 def test_a_sheared_proposal_samples_the_banana_exactly_and_is_accepted_more_often():
@@ -40,11 +41,11 @@ def test_a_sheared_proposal_samples_the_banana_exactly_and_is_accepted_more_ofte
     Jacobian is 1 and q is evaluated in the sheared coordinates (mutation: q of u instead of y fails). 1000 τ
     (τ ≈ 1.2 sheared): Var x₂ of a chi-square-like tail has a relative MCSE ~2.5 %, a tenth is 4 of them."""
     x = banana(4000, np.random.default_rng(1))
-    mean, cov, edges, shear = fit_proposal(x)
-    assert shear is not None
+    mean, cov, pmap = fit_proposal(x)
+    assert pmap.shear is not None
     mean0, cov0 = x.mean(axis=0), np.cov(x, rowvar=False)
     runs = {}
-    for label, proposal, rule in (("sheared", (mean, cov, edges, shear), {"min_tau_multiple": 1000}),
+    for label, proposal, rule in (("sheared", (mean, cov, pmap), {"min_tau_multiple": 1000}),
                                   ("plain", (mean0, cov0), {"max_steps": 300})):  # its acceptance only
         runs[label] = sample(log_banana, np.array([0.0, B]), np.eye(2) * 0.1, proposal=proposal,
                              settings=MCMCSettings(seed=4, progress=False, moves=(("independence", 1.0),), **rule))
@@ -56,4 +57,4 @@ def test_a_sheared_proposal_samples_the_banana_exactly_and_is_accepted_more_ofte
     assert np.all(np.abs(post.var(axis=0) / np.array([1.0, 2 * B**2 + S**2]) - 1) < 0.1), post.var(axis=0)
     gain = runs["sheared"].acceptance.mean() / runs["plain"].acceptance.mean()
     assert gain > 2.0, gain
-    assert Independence(mean, cov, edges, shear).shear is not None and SHEAR_MIN_GAIN > 0
+    assert Independence(mean, cov, pmap).pmap.shear is not None and SHEAR_MIN_GAIN > 0
