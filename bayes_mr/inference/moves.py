@@ -72,9 +72,12 @@ class Independence(emcee.moves.MHMove):
     (:func:`~bayes_mr.inference.proposal.fit_proposal`): a coordinate piled against a bound of the prior box in
     log-distance to it, a non-Gaussian marginal mapped onto the normal through its quantiles, a curved ridge
     (a banana: spencer's γ moves with n and n² on the packaged damper) straightened by a shear; q(x) carries
-    the map's Jacobian. Measured on spencer's posterior (main job's part A, seed 0, unbudgeted): with the
-    shear the chain converged after 1800 steps (τ 10–15, R-hat < 1.01; acceptance 0.27) where without it
-    2500 steps had not (τ 20–26, 37–43 for γ, β, n; R-hat 1.03; acceptance 0.22).
+    the map's Jacobian. Measured on spencer's posterior (main job's part A, seed 0, unbudgeted, 56 walkers):
+    with the shear the chain converged after 1800 steps (τ 10–15, R-hat < 1.01; acceptance 0.27) where
+    without it 2500 steps had not (τ 20–26, 37–43 for γ, β, n; R-hat 1.03; acceptance 0.22); with the
+    marginal maps too, τ 7–8 (β 11) and the last adaptation round accepted 0.31, but R-hat < 1.01 held only
+    after 2100 steps (β's was the last to pass). With 30 walkers (shear only) τ was 41–62 after 3000 steps:
+    the rounds' fits from fewer draws accepted 0.09–0.14.
 
     Given the box (the map's ``box``), proposals are drawn from q *restricted to it*:
     a draw outside is drawn again (up to :data:`REDRAWS` times). The
