@@ -128,14 +128,12 @@ class Budget:
 #: for 180 s (``max_seconds``). One whose measured step cost at its least-squares optimum projects the pilot and
 #: a minimal chain past that is not started, and a chain whose own integrated time projects the rule past it
 #: stops there (``stopped`` "projected"); the headline names either and gives the numbers
-#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores): normalized-bouc-wen converges in ~850 steps (~112 s),
-#: dahl and lugre in 500-750 (10-20 s); bouc-wen, whose best fit lies in the β₁ ≈ −γ valley (~26 sub-steps per
-#: sample), and spencer, five weakly informed parameters on a plateau out to the prior's bound, stop on their
-#: projection. Run unbudgeted their τ keeps growing with the chain (bouc-wen 18 after 600 steps, R-hat 1.09;
-#: spencer 25 after 1200, R-hat 1.03): converging them would take several minutes more than the 15-minute job
-#: has — for bouc-wen its τ, not its cost: since ROS2 takes a stiff interval in several steps its budgeted chain
-#: runs ~550 steps instead of 100, and its τ estimate there is 42. With this limit the job takes 11-13 min; it
-#: was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
+#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores, README's run): normalized-bouc-wen converges in ~350
+#: steps after its 300-step pilot and round (121 s), dahl and lugre in ~400 (14 s); bouc-wen, whose walkers spread
+#: along the β₁ ≈ −γ valley out to γ's prior bound, stops on its projection (τ 21 after 450 steps; unbudgeted, τ 37
+#: and R-hat 1.02 after 4000), and spencer's measured step (0.33 s for 56 walkers) projects its pilot and shortest
+#: chain past 180 s: unbudgeted it converges after 500 + 2100 steps (τ 7-8, R-hat < 1.01 binding), ~14 min alone.
+#: With this limit the job takes 14 min; it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
