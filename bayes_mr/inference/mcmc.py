@@ -37,8 +37,9 @@ jointly better (``bounds``; normalized-bouc-wen's n on the compare record:
 τ 10 → 5; :func:`~bayes_mr.inference.proposal.fit_proposal`), a non-Gaussian marginal mapped onto the
 normal's quantiles and a curved ridge straightened by a shear where either fits the pilot clearly better
 (:mod:`bayes_mr.inference.proposal`), drawn only inside the box (a draw outside is drawn
-again: exact, and no evaluation is spent on a point the prior rejects; normalized-bouc-wen on the packaged damper: 1300 → 850 steps) — and the
-chain proper starts from the pilot's last walkers (the pilot is not part of the result).
+again: exact, and no evaluation is spent on a point the prior rejects; normalized-bouc-wen on
+the packaged damper: 1300 → 850 steps) — and the chain proper starts from the pilot's last
+walkers (the pilot is not part of the result).
 Measured on the bench's dahl posterior (6-d, 24 walkers, 25 s at 1 kHz):
 integrated time 21–24 steps with DE + snooker (3000 steps, 54 s) and 3.0–3.4
 with the pilot-fitted independence move (500 steps after a 500-step pilot,

@@ -158,7 +158,7 @@ def fit_margins(u: np.ndarray, min_gain: float = MARGIN_MIN_GAIN) -> dict:
 
 
 def sheared(u: np.ndarray, shear) -> np.ndarray:
-    """y = u − B (u − c)² of :class:`Independence` (u itself without a shear)."""
+    """y = u − B (u − c)² of :class:`ProposalMap` (u itself without a shear)."""
     if shear is None:
         return u
     centre, b = shear
@@ -193,7 +193,7 @@ def fit_shear(u: np.ndarray, min_gain: float = SHEAR_MIN_GAIN):
     invertible in one step (:func:`unsheared`) and its Jacobian 1.
     """
     u = np.asarray(u, float)
-    n, d = u.shape
+    d = u.shape[1]
     centre = u.mean(axis=0)
     sq = (u - centre) ** 2
     b = np.zeros((d, d))
