@@ -480,9 +480,9 @@ def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
     inside = np.all((exact >= lower) & (exact <= upper), axis=1)
     assert 0.55 < inside.mean() < 0.65
     exact = exact[inside]
-    edges = ProposalMap(box=(lower, upper))
+    in_box = ProposalMap(box=(lower, upper))
     runs = {}
-    for label, proposal in (("box", (mu, cov, edges)), ("free", (mu, cov))):
+    for label, proposal in (("box", (mu, cov, in_box)), ("free", (mu, cov))):
         runs[label] = sample(log_prob, mu, cov * 0.1, proposal=proposal, bounds=(lower, upper),
                              settings=MCMCSettings(seed=2, progress=False, moves=(("independence", 1.0),),
                                                    min_tau_multiple=500))
@@ -491,7 +491,7 @@ def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
     assert np.all(np.abs((res.mean() - exact.mean(axis=0)) / res.mcse()) < 2.88), (res.mean(), res.mcse())
     post = res.chain[res.burn:].reshape(-1, 2)
     assert np.all(np.abs(post.var(axis=0) / exact.var(axis=0) - 1) < 0.1), post.var(axis=0)
-    assert Independence(mu, cov, edges).box is not None
+    assert Independence(mu, cov, in_box).box is not None
     gain = runs["box"].acceptance.mean() / runs["free"].acceptance.mean()
     assert gain > 1.4, gain  # ~1 / (in-box share of q) = 1.65 when q is the target's own Gaussian
 
@@ -513,11 +513,11 @@ def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stay
     rng = np.random.default_rng(0)
     x0 = rng.exponential(1.0, 4000)
     draws = np.column_stack([x0, 0.5 * x0 + rng.standard_normal(4000)])
-    m_u, cov_u, edges = fit_proposal(draws, (lower, upper))
-    assert edges.shear is None  # a straight ridge: nothing to straighten
-    assert list(edges.side) == [-1, 0]
+    m_u, cov_u, pmap = fit_proposal(draws, (lower, upper))
+    assert pmap.shear is None  # a straight ridge: nothing to straighten
+    assert list(pmap.side) == [-1, 0]
     off = (m_u + np.array([0.3, -0.3]), cov_u * 1.6)
-    alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, edges),
+    alone = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1, proposal=(*off, pmap),
                    settings=MCMCSettings(seed=3, progress=False, moves=(("independence", 1.0),), min_tau_multiple=500))
     default = sample(log_prob, np.array([1.0, 0.5]), np.eye(2) * 0.1,
                      MCMCSettings(seed=3, progress=False, min_tau_multiple=500), bounds=(lower, upper))
