@@ -80,9 +80,7 @@ class ProposalMap:
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(y, ln |dy/dx|) of the rows of x (n, d)."""
-        x = np.atleast_2d(x)
-        edges = self._edges()
-        u, log_jac = to_edge_coords(x, edges) if edges else (x, np.zeros(x.shape[0]))
+        u, log_jac = to_edge_coords(np.atleast_2d(x), self._edges())
         if self.margins:
             u = np.array(u, float, copy=True)
             for j, knots in self.margins.items():
@@ -97,8 +95,7 @@ class ProposalMap:
             u = np.array(u, float, copy=True)
             for j, knots in self.margins.items():
                 u[:, j] = margin_inverse(u[:, j], knots)
-        edges = self._edges()
-        return from_edge_coords(u, edges) if edges else u
+        return from_edge_coords(u, self._edges())
 
     def _edges(self):
         if self.side is None or not np.any(self.side):
@@ -244,10 +241,9 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
     x = np.asarray(x, float)
     box = None if bounds is None else tuple(np.asarray(b, float) for b in bounds)
     side = None if bounds is None else _fit_edges(x, box)
-    u = to_edge_coords(x, (*box, side))[0] if side is not None else x
+    u = ProposalMap(box=box, side=side).forward(x)[0]
     margins = fit_margins(u)
-    if margins:
-        u = ProposalMap(margins=margins).forward(u)[0]
+    u = ProposalMap(margins=margins).forward(u)[0]
     pmap = ProposalMap(box=box, side=side, margins=margins, shear=fit_shear(u))
     y = sheared(u, pmap.shear)
     return y.mean(axis=0), np.cov(y, rowvar=False), pmap
