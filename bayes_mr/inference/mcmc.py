@@ -25,7 +25,7 @@ With a wall-time budget (``max_seconds``) the chain is checked once more
 where the budget runs out, off the grid; a chain that meets the rule there is
 converged (``stopped`` "converged"), else it stopped on "max_seconds".
 
-Moves: an independence proposal from a multivariate t fitted to a pilot
+Moves: an independence proposal (a t₂₀ with a defensive t₄ share) fitted to a pilot
 chain (70 %, :class:`~bayes_mr.inference.moves.Independence`), differential
 evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and the DE snooker update
 (10 %, :class:`~bayes_mr.inference.moves.Snooker`). Without a ``proposal`` the
@@ -104,7 +104,7 @@ from ..synthetic_noise import as_seed_sequence
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged
-from .moves import MOVES, NEEDS_PROPOSAL, local_moves
+from .moves import DEFENSIVE_SHARE, MOVES, NEEDS_PROPOSAL, PROPOSAL_DF, local_moves
 from .proposal import fit_proposal
 from .walkers import LogDensity, start_walkers
 
@@ -145,6 +145,11 @@ class MCMCSettings:
         second half of a round that used it (module docstring); 0: the pilot's proposal is kept.
     adapt_steps : int
         Steps of each adaptation round.
+    proposal_df : float
+        Degrees of freedom ν of the independence move's t (:data:`~.moves.PROPOSAL_DF`, where it is measured).
+    defensive_share : float
+        Share of the independence move's proposals drawn from its heavy-tailed defensive component
+        (:data:`~.moves.DEFENSIVE_SHARE`; 0: none).
     seed : int or SeedSequence
         Seed of the run (walker initialisation and moves).
     backend : str or Path or None
@@ -166,6 +171,8 @@ class MCMCSettings:
     pilot_steps: int = 200
     adapt_rounds: int = 3
     adapt_steps: int = 100
+    proposal_df: float = PROPOSAL_DF
+    defensive_share: float = DEFENSIVE_SHARE
     seed: int | np.random.SeedSequence = 0
     backend: str | Path | None = None
     resume: bool = False
@@ -208,7 +215,7 @@ class MCMCSettings:
             if name in NEEDS_PROPOSAL:
                 if proposal is None:
                     raise ValueError(f"the move '{name}' needs a proposal (mean, cov)")
-                moves.append((MOVES[name](*proposal), float(w)))
+                moves.append((MOVES[name](*proposal, df=self.proposal_df, defensive=self.defensive_share), float(w)))
             else:
                 moves.append((MOVES[name](), float(w)))
         return moves

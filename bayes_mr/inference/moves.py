@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import emcee
 import numpy as np
+from scipy.special import gammaln, logsumexp
 
 from .proposal import ProposalMap
 
@@ -54,8 +55,31 @@ def jittered_cholesky(cov) -> np.ndarray:
         return np.linalg.cholesky((u * np.maximum(w, jitter)) @ u.T + jitter * np.eye(d))
 
 
+#: Degrees of freedom ν of :class:`Independence`'s main t (:class:`~bayes_mr.inference.mcmc.MCMCSettings`'s
+#: ``proposal_df``). The scale matrix is the draws' covariance whatever ν, so a t with small ν is wider than
+#: them (covariance Σ·ν/(ν − 2): twice at ν = 4) and spends proposals in the tails. Measured on the packaged
+#: damper (main job's part A): a proposal fitted to 3000 draws of a converged chain's second half accepts, at
+#: ν = 4, 10, 20, 50, 0.41, 0.55, 0.60, 0.63 of the time on spencer's posterior, 0.44, 0.49, 0.51, 0.53 on
+#: bouc-wen's, 0.61, 0.76, 0.80, 0.83 on normalized-bouc-wen's (1120 proposals against 3000 held-out
+#: draws; scaling Σ by (ν − 2)/ν to match covariances was no better). In the sampler (pilot, rounds and
+#: chain, seeds 0 and 1) t₂₀ alone took dahl from 400, 400 to 300, 200 steps (τ 2.4–3.2 → 1.7–2.5), lugre from
+#: 400, 450 to 250, 350, normalized-bouc-wen from 350, 500 to 550, 450, spencer (seed 0) from 2100 to 1250.
+#: But where the target's tails outrun q's and no map straightens them, a light-tailed q sticks: on the
+#: banana of ``tests/inference/test_shear.py`` t₂₀ alone needed 2250, > 20 000 and 2300 steps (seeds 4-6;
+#: τ up to 405) where t₄ needed 500, 2650, 1150. Hence the defensive mixture below (Hesterberg 1995): with
+#: it, 1100, 850, 1350 steps there, and spencer's chain accepted 0.38 and converged after 900 steps
+#: (τ 5.6–7.6; t₄ alone: 2100, τ 7–11).
+PROPOSAL_DF = 20.0
+#: Share and ν of the heavy-tailed component mixed into :class:`Independence`'s q
+#: (``MCMCSettings.defensive_share``): q = 0.8 t₂₀ + 0.2 t₄ bounds p/q by p/(0.2 t₄) wherever the target's
+#: tails outrun t₂₀. On spencer's converged draws it costs little (acceptance 0.61 → 0.56 against t₂₀ alone,
+#: 0.41 with t₄ alone); a share of 0.1 was not enough on the banana (10 450 steps for seed 5).
+DEFENSIVE_SHARE = 0.2
+DEFENSIVE_DF = 4.0
+
+
 class Independence(emcee.moves.MHMove):
-    """Independence Metropolis–Hastings from a fixed multivariate t (emcee ``MHMove``).
+    """Independence Metropolis–Hastings from a fixed mixture of two multivariate t (emcee ``MHMove``).
 
     Every walker proposes x' ~ q whatever its position, and accepts
     with min(1, p(x') q(x) / (p(x) q(x'))): the chain is exact for any fixed
@@ -65,8 +89,9 @@ class Independence(emcee.moves.MHMove):
     independent — an integrated time of a few steps where the local
     differential-evolution moves need tens. Where q is a poor fit (a curved
     valley) it is rejected more often and the ensemble's DE moves carry the
-    chain. The t tails (ν = 4) keep the importance ratio p/q bounded where a
-    Gaussian q would be lighter tailed than the target.
+    chain. q is a mixture of a t with ν = :data:`PROPOSAL_DF` and a defensive t₄ (:data:`DEFENSIVE_SHARE`
+    of it) of the same centre and scale: the t₂₀ accepts more often than a heavy-tailed t, the t₄ keeps
+    the importance ratio p/q bounded where the target's tails outrun t₂₀ (measured at the constants).
 
     q is a t in the coordinates of a :class:`~bayes_mr.inference.proposal.ProposalMap`, fitted to a pilot
     (:func:`~bayes_mr.inference.proposal.fit_proposal`): a coordinate piled against a bound of the prior box in
@@ -77,7 +102,8 @@ class Independence(emcee.moves.MHMove):
     without it 2500 steps had not (τ 20–26, 37–43 for γ, β, n; R-hat 1.03; acceptance 0.22); with the
     marginal maps too, τ 7–8 (β 11) and the last adaptation round accepted 0.31, but R-hat < 1.01 held only
     after 2100 steps (β's was the last to pass). With 30 walkers (shear only) τ was 41–62 after 3000 steps:
-    the rounds' fits from fewer draws accepted 0.09–0.14.
+    the rounds' fits from fewer draws accepted 0.09–0.14. All of these with t₄ alone; with the mixture
+    spencer's chain accepted 0.38 and converged after 900 steps (τ 5.6–7.6).
 
     Given the box (the map's ``box``), proposals are drawn from q *restricted to it*:
     a draw outside is drawn again (up to :data:`REDRAWS` times). The
@@ -98,13 +124,21 @@ class Independence(emcee.moves.MHMove):
         x → y and the target's support box (default: y = x, no box).
     df : float
         Degrees of freedom ν.
+    defensive : float
+        Share ε of the defensive component (ν = :data:`DEFENSIVE_DF`, same centre, scale and map): q is
+        (1 − ε) t_ν + ε t₄, so p/q ≤ p/(ε t₄) wherever the target's tails outrun t_ν (0: t_ν alone).
     """
 
-    def __init__(self, mean, cov, pmap: ProposalMap | None = None, df: float = 4.0):
+    def __init__(self, mean, cov, pmap: ProposalMap | None = None, df: float = PROPOSAL_DF,
+                 defensive: float = DEFENSIVE_SHARE):
         self.mean = np.asarray(mean, float)
         d = self.mean.size
         self.chol = jittered_cholesky(cov)
         self.df = float(df)
+        if not 0.0 <= defensive < 1.0:
+            raise ValueError(f"the defensive share must be in [0, 1), got {defensive}")
+        # (share, ν) of each component of the mixture
+        self.components = ((1.0 - defensive, self.df),) + (((defensive, DEFENSIVE_DF),) if defensive else ())
         self.pmap = pmap or ProposalMap()
         self.box = self.pmap.box
         super().__init__(self._propose, ndim=d)
@@ -114,12 +148,21 @@ class Independence(emcee.moves.MHMove):
         x = np.atleast_2d(x)
         y, log_jac = self.pmap.forward(x)
         z = np.linalg.solve(self.chol, (y - self.mean).T)
-        return -0.5 * (self.df + self.mean.size) * np.log1p(np.sum(z * z, axis=0) / self.df) + log_jac
+        q = np.sum(z * z, axis=0)
+        d = self.mean.size
+        # each component's normalised ln density less the common ln|Σ|/2 (their ratio is what the mixture needs)
+        terms = [np.log(share) + gammaln(0.5 * (nu + d)) - gammaln(0.5 * nu) - 0.5 * d * np.log(nu * np.pi)
+                 - 0.5 * (nu + d) * np.log1p(q / nu) for share, nu in self.components]
+        return logsumexp(terms, axis=0) + log_jac
 
     def _draw(self, n: int, random) -> np.ndarray:
         """n draws of q (target coordinates)."""
         z = random.randn(n, self.mean.size) @ self.chol.T
-        w = np.sqrt(random.chisquare(self.df, n) / self.df)
+        nu = np.full(n, self.df)
+        if len(self.components) > 1:
+            share, nu_defensive = self.components[1]
+            nu[random.rand(n) < share] = nu_defensive
+        w = np.sqrt(random.chisquare(nu) / nu)
         return self.pmap.inverse(self.mean + z / w[:, None])
 
     def _outside(self, q: np.ndarray) -> np.ndarray:

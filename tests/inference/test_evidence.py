@@ -107,9 +107,10 @@ def test_power_posterior_ti_matches_the_analytic_evidence_with_its_ladder_error(
     assert ti.total_error < 0.6
     # the plain trapezoid is biased low on this ladder (the integrand is convex in β): over twelve ladder seeds it
     # missed by −0.20 to −0.56 (mean −0.40) against an MC error of 0.11–0.14, so its miss in units of the MC
-    # error (1.6–4.8) is no fixed bound; its sign is, and the correction must move the estimate up by more
-    # than the MC error
-    assert ti.details["trapezoid"] < log_z
+    # error (1.6–4.8) is no fixed bound, and neither is its sign in one run: the rungs' short chains start from
+    # the posterior's last walkers, and from another posterior chain (the independence move's t₂₀ with a t₄
+    # share) four ladder seeds missed by +0.04 to −0.41. What holds is that the correction moves the estimate
+    # up by more than the MC error
     assert ti.log_z - ti.details["trapezoid"] > ti.mc_error
 
 

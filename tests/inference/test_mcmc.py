@@ -59,7 +59,9 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     assert np.all(np.abs(z) < 2.88), z
     assert np.all(res.rhat < 1.01), res.rhat
     assert abs(chi2_z(res, mu, P)) < 4.0
-    assert 0.15 < res.acceptance.mean() < 0.6
+    # the independence move's t₂₀ (with its t₄ share) on a Gaussian accepts ~0.68 (0.5 with t₄ alone); a move that
+    # accepts everything (a zero step) would pass the moments and not this
+    assert 0.15 < res.acceptance.mean() < 0.9
 
 
 def test_monte_carlo_errors_are_calibrated_over_seeds():
@@ -101,16 +103,21 @@ def test_independence_move_alone_is_exact_with_a_wrong_proposal():
     assert default.tau.max() < 6.0, default.tau  # a Gaussian fitted to the pilot is close to this target
 
 
-def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow():
+def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow(monkeypatch):
     """A 12-d correlated target started from a cloud 1/20 of its spread: the 200-step DE pilot has not reached
     the target's width, so its q is too narrow. Each round refits q to the walkers it moved: acceptance rises
-    from round to round, and the chain proper mixes faster than with the pilot's q frozen (measured over three
-    seeds: τ 4.7–4.9 against 6.3–7.6 steps, 500–600 steps to the rule against 750–950); both are exact."""
+    from round to round, and the chain proper mixes faster than with the pilot's q frozen; both are exact.
+    Measured (seeds 0-2): the first round accepts 0.46-0.48, which ends the adaptation by default (τ 3.1-3.6,
+    350-400 steps to the rule against 5.3-7.2 and 550-900 frozen); with the rounds made to go on, the second
+    accepts 0.53-0.56 — here they do, so that the refit itself is what is tested."""
+    from bayes_mr.inference import mcmc
+
+    monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
     adapted = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False))
     frozen = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False, adapt_rounds=0))
     acc = adapted.adapt_acceptance
-    assert len(acc) >= 2 and acc[-1] > acc[0], acc
+    assert len(acc) >= 2 and acc[1] > acc[0], acc
     assert frozen.adapt_acceptance == () and frozen.pilot_steps == MCMCSettings().pilot_steps
     assert adapted.tau.max() < frozen.tau.max()
     for res in (adapted, frozen):
