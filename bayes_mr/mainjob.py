@@ -128,12 +128,13 @@ class Budget:
 #: for 180 s (``max_seconds``). One whose measured step cost at its least-squares optimum projects the pilot and
 #: a minimal chain past that is not started, and a chain whose own integrated time projects the rule past it
 #: stops there (``stopped`` "projected"); the headline names either and gives the numbers
-#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores, README's run): normalized-bouc-wen converges in ~350
-#: steps after its 300-step pilot and round (121 s), dahl and lugre in ~400 (14 s); bouc-wen, whose walkers spread
-#: along the β₁ ≈ −γ valley out to γ's prior bound, stops on its projection (τ 21 after 450 steps; unbudgeted, τ 37
-#: and R-hat 1.02 after 4000), and spencer's measured step (0.33 s for 56 walkers) projects its pilot and shortest
-#: chain past 180 s: unbudgeted it converges after 500 + 2100 steps (τ 7-8, R-hat < 1.01 binding), ~14 min alone.
-#: With this limit the job takes 14 min; it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
+#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores, README's run): normalized-bouc-wen converges in ~400
+#: steps after its 300-step pilot and round (134 s), dahl and lugre in 300-400 (12-15 s); bouc-wen, whose walkers
+#: spread along the β₁ ≈ −γ ridge out to γ's prior bound, adapts its proposal over six rounds (800 steps) and
+#: stops on its projection (600 steps, τ ≥ 15, R-hat 1.07; unbudgeted it converges in 2750, τ ≤ 31), and spencer's
+#: measured step (0.33-0.40 s for 56 walkers) projects its pilot and shortest chain past 180 s: unbudgeted it
+#: converges after 500 + 900 steps (τ 5.6-7.6, R-hat < 1.01 binding), 8-9 min alone. With this limit the job
+#: takes 14-17 min (machine speed); it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for

@@ -93,7 +93,7 @@ class Independence(emcee.moves.MHMove):
     of it) of the same centre and scale: the t₂₀ accepts more often than a heavy-tailed t, the t₄ keeps
     the importance ratio p/q bounded where the target's tails outrun t₂₀ (measured at the constants).
 
-    q is a t in the coordinates of a :class:`~bayes_mr.inference.proposal.ProposalMap`, fitted to a pilot
+    q is that mixture in the coordinates of a :class:`~bayes_mr.inference.proposal.ProposalMap`, fitted to a pilot
     (:func:`~bayes_mr.inference.proposal.fit_proposal`): a coordinate piled against a bound of the prior box in
     log-distance to it, a non-Gaussian marginal mapped onto the normal through its quantiles, a curved ridge
     (a banana: spencer's γ moves with n and n² on the packaged damper) straightened by a shear; q(x) carries
