@@ -134,11 +134,10 @@ class Independence(emcee.moves.MHMove):
         self.mean = np.asarray(mean, float)
         d = self.mean.size
         self.chol = jittered_cholesky(cov)
-        self.df = float(df)
         if not 0.0 <= defensive < 1.0:
             raise ValueError(f"the defensive share must be in [0, 1), got {defensive}")
-        # (share, ν) of each component of the mixture
-        self.components = ((1.0 - defensive, self.df),) + (((defensive, DEFENSIVE_DF),) if defensive else ())
+        # (share, ν) of each component of the mixture: the main t first
+        self.components = ((1.0 - defensive, float(df)),) + (((defensive, DEFENSIVE_DF),) if defensive else ())
         self.pmap = pmap or ProposalMap()
         self.box = self.pmap.box
         super().__init__(self._propose, ndim=d)
@@ -158,9 +157,8 @@ class Independence(emcee.moves.MHMove):
     def _draw(self, n: int, random) -> np.ndarray:
         """n draws of q (target coordinates)."""
         z = random.randn(n, self.mean.size) @ self.chol.T
-        nu = np.full(n, self.df)
-        if len(self.components) > 1:
-            share, nu_defensive = self.components[1]
+        nu = np.full(n, self.components[0][1])
+        for share, nu_defensive in self.components[1:]:
             nu[random.rand(n) < share] = nu_defensive
         w = np.sqrt(random.chisquare(nu) / nu)
         return self.pmap.inverse(self.mean + z / w[:, None])
