@@ -47,10 +47,10 @@ import xarray as xr
 from . import results
 from .comparison import choose, compare, row_of, simulating_point, table
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
-from .identify import UKF, Emcee, Identify, LeastSquares, predict
+from .identify import UKF, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
+from .mainjob_posteriors import posterior_order, run_posteriors
 from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
-from .inference.budget import over_budget
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -79,6 +79,10 @@ class Budget:
         not converged, not hidden). With ``max_seconds`` a posterior whose
         measured step cost projects past it is not started, and the report
         says which and why (:mod:`bayes_mr.inference.budget`).
+    mcmc_pool_s : float or None
+        Wall seconds all posteriors share (None: each has ``mcmc.max_seconds`` alone). They run after every
+        form's least squares and UKF, the selected form first, then by evidence, each with what the earlier
+        ones left (:mod:`bayes_mr.mainjob_posteriors`).
     evidence : str
         ``"ti"`` or ``"laplace"`` for the MCMC rows.
     ukf_lhs : int
@@ -99,6 +103,8 @@ class Budget:
         Sampling rate of the diagnosis [Hz] (None: :attr:`fs`). Issue 15: the
         record's own rate or ≥ 1 kHz — a command switch and the field's
         sub-millisecond lag are below a 4-ms sample.
+    shake_table_engines : tuple of str
+        Engines of the virtual shake table (``ukf``, ``lsq``).
     terms : bool
         After the named effects, search the term library for what the extended model still leaves
         (:mod:`bayes_mr.diagnosis.terms`; a term is kept only if the evidence and the error on a held-out
@@ -111,6 +117,7 @@ class Budget:
     train_fraction: float = 0.6
     forms: tuple[str, ...] = tuple(FORMS)
     mcmc: MCMCSettings = field(default_factory=lambda: MCMCSettings(max_steps=3000))
+    mcmc_pool_s: float | None = None
     evidence: str = "ti"
     ukf_lhs: int = 3
     ukf_taus: tuple[float, ...] = TAUS
@@ -118,7 +125,15 @@ class Budget:
     diagnose_fs: float | None = 1000.0
     noise: str = "iid"
     input_interp: str | None = "linear"
+    shake_table_engines: tuple[str, ...] = ("ukf", "lsq")
     terms: bool = True
+
+    def __post_init__(self):
+        unknown = set(self.shake_table_engines) - {"ukf", "lsq"}
+        if unknown:
+            raise ValueError(f"shake_table_engines: {sorted(unknown)} unknown; use 'ukf' and/or 'lsq'")
+        if self.mcmc_pool_s is not None and not self.mcmc_pool_s > 0:
+            raise ValueError(f"mcmc_pool_s must be positive seconds or None, not {self.mcmc_pool_s!r}")
 
 
 #: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's RK4
@@ -139,9 +154,8 @@ class Budget:
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
-FULL = Budget(fs=1000.0, duration_s=None,
-              mcmc=MCMCSettings(max_steps=8000, max_seconds=180.0), evidence="laplace",
-              ukf_lhs=2)
+FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=600.0,
+              evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),
@@ -150,29 +164,27 @@ QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),
 
 
 def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
-    """Every form × engine on A, validated on B (one :func:`bayes_mr.comparison.compare` per form)."""
-    estimators = {"lsq": LeastSquares(),
-                  "mcmc": Emcee(settings=replace(budget.mcmc, seed=seed, progress=False), evidence=budget.evidence),
-                  "ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)}
-    rows, fits, skipped = [], {}, {}
-    for form in budget.forms:
-        # every form is offered a posterior; one whose measured step cost projects past the budget is not
-        # started (budget.py), after the least-squares fit it shares with its lsq row (compare's lsq_mcmc_job)
-        out = compare(part_a, [form], engines=("lsq", "mcmc", "ukf"), validate=part_b, seed=seed, progress=say,
-                      estimators=estimators, noise=budget.noise)
-        for r in out["rows"]:
-            why = over_budget(r.get("error"))
-            if why:  # not a failure: a posterior the budget could not converge, not started (budget.py)
-                skipped[form] = why
-            else:
-                rows.append(r)
-        fits.update(out["idata"])
-        for (m, e), idata in out["idata"].items():
-            results.save(idata, out_dir / "fits" / f"{m.replace('+', '_')}__{e}.nc")
+    """Every form × engine on A, validated on B: least squares and the UKF of every form, then the emcee
+    posteriors from one pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
+    first = compare(part_a, list(budget.forms), engines=("lsq", "ukf"), validate=part_b, seed=seed, progress=say,
+                    estimators={"lsq": LeastSquares(), "ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)},
+                    noise=budget.noise)
+    order = posterior_order(budget.forms, first["selected"], first["bayes_factors"])
+    if budget.mcmc_pool_s is not None:
+        say(f"emcee posteriors from a pool of {budget.mcmc_pool_s:g} s, in this order: {', '.join(order)}")
+    lsq_s = {r["model"]: float(r.get("wall_s") or 0.0) for r in first["rows"] if r["engine"] == "lsq"}
+    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, lsq_s=lsq_s, say=say)
+    fits = dict(first["idata"])
+    fits.update({(m, "mcmc"): idata for m, (_, idata) in chains.items() if idata is not None})
+    by_pair = {(r["model"], r["engine"]): r for r in first["rows"]}
+    by_pair.update({(m, "mcmc"): row for m, (row, _) in chains.items()})
+    rows = [by_pair[(m, e)] for m in budget.forms for e in ("lsq", "mcmc", "ukf") if (m, e) in by_pair]
+    for (m, e), idata in fits.items():
+        results.save(idata, out_dir / "fits" / f"{m.replace('+', '_')}__{e}.nc")
     # selection across forms as compare selects: the route every form has, on the calibrated evidence
     ok = [r for r in rows if "error" not in r]
     return {"rows": rows, **choose(ok, [f for f in budget.forms if any(r["model"] == f for r in ok)]),
-            "mcmc_skipped": skipped, "idata": fits}
+            "mcmc_skipped": skipped, "posterior_order": order, "idata": fits}
 
 
 #: Keys of :func:`bayes_mr.comparison.choose` that ``summary.json`` carries besides ``selected`` and ``bayes_factors``.
@@ -210,9 +222,10 @@ def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, ou
     out = {"frame": dict(THESIS_FRAME), "model": model}
     # least squares from its two best convex-screened starts: on the 13-s part A the normalized Bouc–Wen
     # fit takes ~120 s so (~190 s from four, to the same optimum, measured); the UKF is the thesis's method
-    estimators = (("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)),
-                  ("lsq", LeastSquares(LSQSettings(n_starts=2))))
-    for label, est in estimators:
+    estimators = {"ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus),
+                  "lsq": LeastSquares(LSQSettings(n_starts=2))}
+    for label in budget.shake_table_engines:
+        est = estimators[label]
         say(f"virtual shake table: {model} × {label} (displacement and acceleration only)")
         try:
             idata = Identify(model, est).fit(vst["a"], seed=seed, progress=False)
