@@ -83,5 +83,5 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
         raise OverBudget(
             f"one step of its {n_walkers} walkers costs {step:.2g} s at the least-squares optimum, so the pilot and "
             f"the fewest steps a chain has met the rule in ({steps}) would take ~{step * steps:.0f} s, more than "
-            f"the {max_seconds:g} s this budget gives a posterior: not run")
+            f"the {max_seconds:.3g} s its budget leaves it: not run")
     return step
