@@ -249,8 +249,15 @@ def cmd_run(args) -> int:
 
     record = _read(args.record, args) if args.record else None
     other = _read(args.validate, args) if args.validate else None
+    budget = None
+    if args.mcmc_pool is not None:
+        from dataclasses import replace
+
+        from .mainjob import FULL, QUICK
+
+        budget = replace(QUICK if args.quick else FULL, mcmc_pool_s=args.mcmc_pool)
     summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, noise=args.noise,
-                  record=record, validate=other)
+                  record=record, validate=other, budget=budget)
     print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)
     if args.json:
         _write_json(summary, args.json)

@@ -188,6 +188,9 @@ def _job_parsers(sub) -> None:
     p.add_argument("--noise", choices=("iid", "ar"), default=None,
                    help="residual model of the comparison (default iid); the other one is refitted by least "
                         "squares beside it and the report says how the model choice and ln BF move")
+    p.add_argument("--mcmc-pool", type=float, default=None, metavar="SECONDS",
+                   help="wall seconds the emcee posteriors share, the selected form's first (default 600; "
+                        "--quick: none, each posterior runs to its step limit)")
     _no_readme_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 

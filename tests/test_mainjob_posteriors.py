@@ -47,3 +47,10 @@ def test_the_budget_refuses_what_it_cannot_run():
         replace(FULL, shake_table_engines=("ukf", "mcmc"))
     with pytest.raises(ValueError, match="mcmc_pool_s"):
         Budget(fs=250.0, duration_s=None, mcmc_pool_s=0.0)
+
+
+def test_the_cli_refuses_a_pool_that_is_not_positive(capsys):
+    from bayes_mr.cli import main
+
+    assert main(["run", "--quick", "--mcmc-pool", "0", "--out", "unused", "--no-readme", "--quiet"]) == 2
+    assert "mcmc_pool_s must be positive" in capsys.readouterr().err
