@@ -8,10 +8,11 @@ command voltage, measured force):
    :attr:`Budget.fs` with an anti-alias filter, and a split into part A
    (training, the first :attr:`Budget.train_fraction`) and part B (never seen
    by any fit).
-2. **Compare.** Every form with least squares (Laplace evidence), the emcee
-   posterior (TI evidence) where the budget allows and the thesis's UKF
-   (LHS × τ priors); selection by evidence, MSE and force NRMSE beside it;
-   thesis method 1 (scores on A) and method 2 (predicting B).
+2. **Compare.** Every form with least squares (Laplace evidence) and the
+   thesis's UKF (LHS × τ priors), then the emcee posteriors (TI or Laplace
+   evidence) from one pool of seconds, the selected form's first
+   (:mod:`bayes_mr.mainjob_posteriors`); selection by evidence, MSE and force
+   NRMSE beside it; thesis method 1 (scores on A) and method 2 (predicting B).
 3. **A paper's table.** Spencer et al. (1997)'s published parameters (from a
    secondary source, converted to SI; :mod:`bayes_mr.models.forms`) predict B
    next to the identified models; the identified Spencer parameters stand
@@ -139,21 +140,21 @@ class Budget:
 #: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's RK4
 #: sub-steps are set by the model's stiffness, not by the sampling rate, so 1 kHz costs about what 250 Hz did
 #: (a 24-walker evaluation at the least-squares optima: dahl 65 against 62 ms, bouc-wen 663 against 757 ms).
-#: Every form is offered an emcee posterior that runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or
-#: for 180 s (``max_seconds``). One whose measured step cost at its least-squares optimum projects the pilot and
-#: a minimal chain past that is not started, and a chain whose own integrated time projects the rule past it
-#: stops there (``stopped`` "projected"); the headline names either and gives the numbers
-#: (:mod:`bayes_mr.inference.budget`). Measured (2 cores, README's run): normalized-bouc-wen converges in ~400
-#: steps after its 300-step pilot and round (134 s), dahl and lugre in 300-400 (12-15 s); bouc-wen, whose walkers
-#: spread along the β₁ ≈ −γ ridge out to γ's prior bound, adapts its proposal over six rounds (800 steps) and
-#: stops on its projection (600 steps, τ ≥ 15, R-hat 1.07; unbudgeted it converges in 2750, τ ≤ 31), and spencer's
-#: measured step (0.33-0.40 s for 56 walkers) projects its pilot and shortest chain past 180 s: unbudgeted it
-#: converges after 500 + 900 steps (τ 5.6-7.6, R-hat < 1.01 binding), 8-9 min alone. With this limit the job
-#: takes 14-17 min (machine speed); it was 150 s until one BLAS thread (:mod:`bayes_mr._threads`) made room.
+#: The emcee posteriors share one 600-s pool (``mcmc_pool_s``), the selected form's first, then by evidence
+#: (:mod:`bayes_mr.mainjob_posteriors`); each runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or what
+#: the pool has left runs out. One whose measured step cost at its least-squares optimum projects the pilot and a
+#: minimal chain past that is not started, and a chain whose own integrated time projects the rule past it stops
+#: there (``stopped`` "projected"); the headline names either and gives the numbers (:mod:`bayes_mr.inference.budget`).
+#: Measured (2 cores, README's run): the selected spencer converges in 571 s — a 200-step pilot, five adaptation
+#: rounds (acceptance 0.13 → 0.42) and 900 steps, τ 7.2, R-hat 1.009 binding: with walkers as chains, R-hat < 1.01
+#: asks ~130 τ of every walker, whatever their number —; lugre converges in what is left (20 s);
+#: normalized-bouc-wen (134 s and 400 steps after its pilot in the run before), dahl (12 s) and bouc-wen (2750
+#: steps unbudgeted) do not fit in the rest, and the report says so. A per-posterior 180 s (until this round) never let spencer start.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
-#: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it.
+#: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake
+#: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
-#: spencer ~5 min, the extension study's procedure from the comparison's optimum).
+#: spencer ~6 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=600.0,
               evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
