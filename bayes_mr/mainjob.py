@@ -328,6 +328,7 @@ def _comparison_summary(comp: dict, budget: Budget, info: dict, sensitivity: dic
         "record": info,
         "rows": comp["rows"], "selected": comp["selected"], "bayes_factors": comp["bayes_factors"],
         "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
+        "posterior_order": comp["posterior_order"],
         **{k: comp[k] for k in SELECTION_KEYS if k in comp},
         "noise": budget.noise, "noise_sensitivity": sensitivity,
         "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],
