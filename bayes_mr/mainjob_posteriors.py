@@ -51,10 +51,13 @@ def posterior_order(forms, selected: str | None, bayes_factors: dict[str, float]
     return [m for _, m in sorted(enumerate(forms), key=key)]
 
 
-def pool_spent(pool_s: float, used: dict[str, float]) -> str:
-    """Why a posterior was not started once the pool is spent (the forms that spent it, with their seconds)."""
-    spent = ", ".join(f"{m} {s:.0f} s" for m, s in used.items())
-    return f"the posteriors' pool of {pool_s:g} s was spent before its turn ({spent}): not run"
+def pool_spent(pool_s: float, used: dict[str, float], lsq_s: float) -> str:
+    """Why a posterior was not started: what is left of the pool (after the forms that spent it, with their
+    seconds) does not cover the least-squares fit its chain starts from."""
+    left = max(pool_s - sum(used.values()), 0.0)
+    spent = "".join(f", {m} {s:.0f} s" for m, s in used.items())
+    return (f"the {left:.0f} s left of the posteriors' pool of {pool_s:g} s (spent: {spent[2:] or 'nothing yet'}) do "
+            f"not cover the least-squares fit its chain starts from ({lsq_s:.0f} s): not run")
 
 
 def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: int, lsq_s: dict[str, float],
@@ -93,7 +96,7 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
     for form in order:
         left = math.inf if pool is None else pool - sum(used.values()) - lsq_s.get(form, 0.0)
         if left <= 0:
-            skipped[form] = pool_spent(pool, used)
+            skipped[form] = pool_spent(pool, used, lsq_s.get(form, 0.0))
             say(f"{form} × mcmc: {skipped[form]}")
             continue
         seconds = min(left, cap if cap is not None else math.inf)

@@ -28,7 +28,8 @@ def test_a_spent_pool_starts_nothing_and_says_who_spent_it():
     fits, skipped = run_posteriors(rec, None, ["dahl", "lugre"], budget, seed=0, lsq_s={"dahl": 1.0},
                                    say=lambda *_: None)
     assert fits == {}
-    assert skipped["dahl"].startswith("the posteriors' pool of 0.05 s was spent")
+    assert skipped["dahl"] == ("the 0 s left of the posteriors' pool of 0.05 s (spent: nothing yet) do not cover the "
+                               "least-squares fit its chain starts from (1 s): not run")
     assert "more than the" in skipped["lugre"] and skipped["lugre"].endswith("not run")
 
 
