@@ -145,12 +145,12 @@ class Budget:
 #: the pool has left runs out. One whose measured step cost at its least-squares optimum projects the pilot and a
 #: minimal chain past that is not started, and a chain whose own integrated time projects the rule past it stops
 #: there (``stopped`` "projected"); the headline names either, with the numbers (:mod:`bayes_mr.inference.budget`).
-#: Measured (2 cores, README's run): the selected spencer converges in 571 s — a 200-step pilot, five adaptation
-#: rounds (acceptance 0.13 → 0.42) and 900 steps at 0.34 s, τ 7.2, R-hat 1.009 binding (with walkers as chains,
-#: R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — and lugre in what is left (20 s);
-#: normalized-bouc-wen (134 s and 400 steps after its pilot in the run before), dahl (12 s) and bouc-wen (2750
-#: steps unbudgeted) do not fit in the rest, and the report says so. With 180 s per posterior (until this round)
-#: spencer never started.
+#: Measured (2 cores, two runs of this tree): the selected spencer converges in 555-571 s (with its least squares)
+#: — a 200-step pilot, five adaptation rounds (acceptance 0.13 → 0.42) and 900 steps at ~0.34 s, τ 7.2, R-hat
+#: 1.009 binding (with walkers as chains, R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — then
+#: lugre (15-20 s) and dahl (14 s; in the slower run the pool was spent before its turn) converge in what is left;
+#: normalized-bouc-wen (its pilot and shortest chain projected at ~119 s) and bouc-wen (2750 steps unbudgeted) do
+#: not fit in it, and the report says so. With 180 s per posterior (until this round) spencer never started.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake
 #: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
