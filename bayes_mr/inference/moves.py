@@ -158,7 +158,8 @@ class Independence(emcee.moves.MHMove):
         """n draws of q (target coordinates)."""
         z = random.randn(n, self.mean.size) @ self.chol.T
         nu = np.full(n, self.components[0][1])
-        for share, nu_defensive in self.components[1:]:
+        if len(self.components) == 2:  # one defensive component at most (__init__)
+            share, nu_defensive = self.components[1]
             nu[random.rand(n) < share] = nu_defensive
         w = np.sqrt(random.chisquare(nu) / nu)
         return self.pmap.inverse(self.mean + z / w[:, None])
