@@ -38,7 +38,8 @@ def over_budget(error: str | None) -> str | None:
 TIMED_CALLS = 3
 
 
-def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int, max_seconds: float) -> float:
+def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int, max_seconds: float,
+                 chain_walkers: int | None = None) -> float:
     """Seconds of one ensemble step at ``center``; raise :class:`OverBudget` if the run cannot fit.
 
     The ensemble is evaluated once untimed, then :data:`TIMED_CALLS` times, and the fastest call is the step's
@@ -60,6 +61,9 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
         (``MCMCSettings.pilot_length``; 0 if none).
     max_seconds : float
         The chain's wall-time budget [s].
+    chain_walkers : int, optional
+        Walkers of the chain proper when fewer than the pilot's (``MCMCSettings.walkers_after_pilot``): its
+        steps cost that share of the timed ensemble's (one evaluation per walker).
 
     Returns
     -------
@@ -78,10 +82,12 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
         t0 = _time.perf_counter()
         log_prob(x)
         step = min(step, _time.perf_counter() - t0)
-    steps = pilot_steps + MIN_CHAIN_STEPS
-    if step * steps > max_seconds:
+    chain_step = step * (chain_walkers or n_walkers) / n_walkers
+    projected = step * pilot_steps + chain_step * MIN_CHAIN_STEPS
+    if projected > max_seconds:
+        chain = "" if chain_walkers in (None, n_walkers) else f" of {chain_walkers} walkers"
         raise OverBudget(
-            f"one step of its {n_walkers} walkers costs {step:.2g} s at the least-squares optimum, so the pilot and "
-            f"the fewest steps a chain has met the rule in ({steps}) would take ~{step * steps:.0f} s, more than "
-            f"the {max_seconds:.3g} s its budget leaves it: not run")
+            f"one step of its {n_walkers} walkers costs {step:.2g} s at the least-squares optimum, so the pilot "
+            f"({pilot_steps} steps) and the fewest steps a chain has met the rule in ({MIN_CHAIN_STEPS}{chain}) would "
+            f"take ~{projected:.0f} s, more than the {max_seconds:.3g} s its budget leaves it: not run")
     return step

@@ -128,8 +128,9 @@ class Emcee:
 
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
         if settings.max_seconds is not None:  # a chain that cannot converge in its budget is not started
-            check_budget(likelihood, start_from_lsq(likelihood, res)[0], settings.walkers(likelihood.ndim),
-                         settings.pilot_length, settings.max_seconds)
+            d = likelihood.ndim
+            check_budget(likelihood, start_from_lsq(likelihood, res)[0], settings.walkers(d), settings.pilot_length,
+                         settings.max_seconds, settings.walkers_after_pilot(d) if settings.pilot_length else None)
         chain = fit_mcmc(likelihood, lsq=res, settings=settings)
         if self.evidence == "ti":
             with job_executor(self.executor) as ex:  # the ladder's rungs: on the cluster the fit runs on, if any

@@ -55,7 +55,7 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     mu, C, P, log_prob = correlated_gaussian(5, seed=1)
     res = sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=7, progress=False))
     assert res.converged
-    assert res.chain.shape[1:] == (20, 5)
+    assert res.chain.shape[1:] == (12, 5)  # the pilot's 20 walkers, the chain proper's 2·d + 2
     assert res.n_steps - res.burn >= 50 * res.tau.max()
     z = (res.mean() - mu) / res.mcse()
     assert np.all(np.abs(z) < 2.88), z
@@ -325,6 +325,12 @@ def test_walker_count_rules():
         MCMCSettings(n_walkers=15).walkers(6)
     with pytest.raises(ValueError, match="2·d"):
         MCMCSettings(n_walkers=12).walkers(6)
+    # the chain proper after a pilot: 2·d + 2 by default, never more than the pilot's
+    assert MCMCSettings().walkers_after_pilot(6) == 14
+    assert MCMCSettings(chain_walkers=20).walkers_after_pilot(6) == 20
+    assert MCMCSettings(chain_walkers=40).walkers_after_pilot(6) == 24
+    with pytest.raises(ValueError, match="chain_walkers"):
+        MCMCSettings(chain_walkers=12).walkers_after_pilot(6)
 
 
 # --- the package's posterior and its results -------------------------------------------
@@ -342,16 +348,16 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     lik = OutputError("dahl", rec)
     lsq = fit_lsq(lik)
     res = fit_mcmc(lik, lsq=lsq, settings=MCMCSettings(seed=0, progress=False, max_steps=200, check_every=100))
-    assert res.chain.shape == (200, 24, 6) and not res.converged
+    assert res.chain.shape == (200, 14, 6) and not res.converged  # 24 walkers in the pilot, 2·d + 2 after it
     idata = results.build(lik, mcmc_posterior(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)}))
     post = idata.posterior
     assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
-    assert post.sizes["chain"] == 24
+    assert post.sizes["chain"] == 14
     ll = idata.log_likelihood
     assert ll.sizes["chain"] * ll.sizes["draw"] <= 200 and ll.sizes["obs"] <= 2000
     assert set(ll.data_vars) == {"displacement", "acceleration"}
     assert idata.posterior_predictive.sizes["draw"] <= 20
-    assert idata.sample_stats["lp"].shape == (24, post.sizes["draw"])
+    assert idata.sample_stats["lp"].shape == (14, post.sizes["draw"])
     assert len(idata.sample_stats.attrs["rhat"]) == 6
     s = results.summary_of(idata)
     assert s.engine == "mcmc" and s.log_evidence == pytest.approx(lsq.log_evidence)
@@ -406,9 +412,13 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
         return -0.5 * np.sum(np.atleast_2d(x) ** 2, axis=1)
 
     assert 0.02 <= check_budget(slow, np.zeros(3), 12, 200, 600.0) < 1.0
-    with pytest.raises(OverBudget, match=f"{200 + MIN_CHAIN_STEPS}"):
+    with pytest.raises(OverBudget, match=rf"pilot \(200 steps\) .* \({MIN_CHAIN_STEPS}\) would take ~1\d s"):
         check_budget(slow, np.zeros(3), 12, 200, 5.0)
-    assert calls == [(12, 3)] * (2 * (1 + TIMED_CALLS))  # the whole ensemble at each call
+    # a chain proper of 8 of the 12 walkers: its steps cost 8/12 of the timed ensemble's (~8 s, still over 5 s;
+    # 12 s allows it where the whole ensemble's 300 steps would not)
+    with pytest.raises(OverBudget, match=rf"\({MIN_CHAIN_STEPS} of 8 walkers\) would take"):
+        check_budget(slow, np.zeros(3), 12, 200, 5.0, chain_walkers=8)
+    assert calls == [(12, 3)] * (3 * (1 + TIMED_CALLS))  # the whole ensemble at each call
     # a job's error string (executor.Outcome) names it: the main job lists it as not run, not as failed
     assert over_budget("OverBudget: one step …") == "one step …"
     assert over_budget("ValueError: OverBudget: no") is None and over_budget(None) is None
