@@ -145,17 +145,18 @@ class Budget:
 #: the pool has left runs out. One whose measured step cost at its least-squares optimum projects the pilot and a
 #: minimal chain past that is not started, and a chain whose own integrated time projects the rule past it stops
 #: there (``stopped`` "projected"); the headline names either, with the numbers (:mod:`bayes_mr.inference.budget`).
-#: Measured (2 cores, two runs of this tree): the selected spencer converges in 555-571 s (with its least squares)
-#: — a 200-step pilot, five adaptation rounds (acceptance 0.13 → 0.42) and 900 steps at ~0.34 s, τ 7.2, R-hat
-#: 1.009 binding (with walkers as chains, R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — then
-#: lugre (15-20 s) and dahl (14 s; in the slower run the pool was spent before its turn) converge in what is left;
-#: normalized-bouc-wen (its pilot and shortest chain projected at ~119 s) and bouc-wen (2750 steps unbudgeted) do
-#: not fit in it, and the report says so. With 180 s per posterior (until this round) spencer never started.
+#: Measured (2 cores, warm kernels; each chain proper on 2·d + 2 walkers, ``MCMCSettings.chain_walkers``): the
+#: selected spencer converges in 436 s with its least squares — a 200-step pilot and three adaptation rounds of 56
+#: walkers (acceptance 0.13 → 0.34), then 1300 steps of 30, τ 11, R-hat 1.0096 binding (with walkers as chains,
+#: R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — then normalized-bouc-wen (90 s), lugre (20 s)
+#: and dahl (24 s) in what is left; bouc-wen (six rounds of 24 walkers and ~4100 steps of 14 unbudgeted, ~5.5 min)
+#: does not fit in it, and the report says so. With 56 walkers in the chain (stop 48) spencer took 555-571 s and
+#: normalized-bouc-wen did not fit either; with 180 s per posterior (until then) spencer never started.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake
 #: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
-#: spencer ~6 min, the extension study's procedure from the comparison's optimum).
+#: spencer ~5 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=600.0,
               evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
