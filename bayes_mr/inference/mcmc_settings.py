@@ -28,7 +28,7 @@ class MCMCSettings:
         Stop when the post-burn-in chain is this many integrated
         autocorrelation times long (emcee's advice: 50).
     burn_tau_multiple : float
-        Burn-in in pilot autocorrelation times (module docstring).
+        Burn-in in pilot autocorrelation times (:mod:`bayes_mr.inference.mcmc`).
     rhat_max : float
         Every coordinate's rank-normalised split R-hat must be below this.
     max_steps : int
@@ -41,13 +41,13 @@ class MCMCSettings:
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
-        Move names (:data:`MOVES`) and weights.
+        Move names (:data:`~.moves.MOVES`) and weights.
     pilot_steps : int
         Steps of the pilot chain that fits the independence move's proposal
-        when :func:`sample` is given none (module docstring).
+        when :func:`~bayes_mr.inference.mcmc.sample` is given none (:mod:`bayes_mr.inference.mcmc`).
     adapt_rounds : int
         At most this many adaptation rounds after the pilot, each refitting the proposal to the
-        second half of a round that used it (module docstring); 0: the pilot's proposal is kept.
+        second half of a round that used it (:mod:`bayes_mr.inference.mcmc`); 0: the pilot's proposal is kept.
     adapt_steps : int
         Steps of each adaptation round.
     proposal_df : float
@@ -57,8 +57,8 @@ class MCMCSettings:
         (:data:`~.moves.DEFENSIVE_SHARE`; 0: none).
     chain_walkers : int or None
         Walkers of the chain proper after a pilot: the first this many of the ensemble the pilot and rounds
-        leave (module docstring, "Walkers"). Default: the fewest differential evolution allows, 2·d + 2
-        (at most the pilot's). Even and ≥ 2·d + 2; without a pilot the chain has :meth:`walkers` walkers.
+        leave (:mod:`bayes_mr.inference.mcmc`, "Walkers"). Default: the fewest differential evolution allows,
+        2·d + 2 (at most the pilot's). Even and ≥ 2·d + 2; without a pilot the chain has :meth:`walkers` walkers.
     seed : int or SeedSequence
         Seed of the run (walker initialisation and moves).
     backend : str or Path or None
@@ -97,8 +97,8 @@ class MCMCSettings:
 
     @property
     def pilot_length(self) -> int:
-        """Fewest steps :func:`sample` runs before the chain proper when given no proposal: the pilot and one
-        adaptation round (0 when no move needs a proposal)."""
+        """Fewest steps :func:`~bayes_mr.inference.mcmc.sample` runs before the chain proper when given no
+        proposal: the pilot and one adaptation round (0 when no move needs a proposal)."""
         if self.pilot_steps < 1 or not any(name in NEEDS_PROPOSAL for name, _ in self.moves):
             return 0
         return self.pilot_steps + (self.adapt_steps if self.adapt_rounds > 0 else 0)
