@@ -149,7 +149,7 @@ class Budget:
 #: selected spencer converges in 436 s with its least squares — a 200-step pilot and three adaptation rounds of 56
 #: walkers (acceptance 0.13 → 0.34), then 1300 steps of 30, τ 11, R-hat 1.0096 binding (with walkers as chains,
 #: R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — then normalized-bouc-wen (90 s), lugre (20 s)
-#: and dahl (24 s) in what is left; bouc-wen (six rounds of 24 walkers and ~4100 steps of 14 unbudgeted, ~5.5 min)
+#: and dahl (24 s) in what is left; bouc-wen (six rounds of 24 walkers and ~4100 steps of 14 unbudgeted, ~7 min)
 #: does not fit in it, and the report says so. With 56 walkers in the chain (stop 48) spencer took 555-571 s and
 #: normalized-bouc-wen did not fit either; with 180 s per posterior (until then) spencer never started.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
