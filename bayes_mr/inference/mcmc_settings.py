@@ -14,6 +14,14 @@ import numpy as np
 from .moves import DEFENSIVE_SHARE, MOVES, NEEDS_PROPOSAL, PROPOSAL_DF
 
 
+def _even_ensemble(name: str, n: int, ndim: int) -> int:
+    """``n`` walkers if even and ≥ 2·d + 2 (red–blue half-ensembles spanning the space), else ValueError."""
+    if n % 2 or n < 2 * ndim + 2:
+        raise ValueError(f"{name} must be even and at least 2·d + 2 = {2 * ndim + 2} "
+                         f"(red–blue half-ensembles spanning the space), got {n}")
+    return n
+
+
 @dataclass(frozen=True)
 class MCMCSettings:
     """Settings of an ensemble run.
@@ -107,17 +115,11 @@ class MCMCSettings:
         """Number of walkers for a ``ndim``-dimensional target."""
         if self.n_walkers is None:
             return max(4 * ndim, 2 * ndim + 2)
-        n = int(self.n_walkers)
-        if n % 2 or n < 2 * ndim + 2:
-            raise ValueError(f"n_walkers must be even and at least 2·d + 2 = {2 * ndim + 2} "
-                             f"(red–blue half-ensembles spanning the space), got {n}")
-        return n
+        return _even_ensemble("n_walkers", int(self.n_walkers), ndim)
 
     def walkers_after_pilot(self, ndim: int) -> int:
         """Walkers of the chain proper when a pilot ran (``chain_walkers``; at most :meth:`walkers`)."""
-        n = 2 * ndim + 2 if self.chain_walkers is None else int(self.chain_walkers)
-        if n % 2 or n < 2 * ndim + 2:
-            raise ValueError(f"chain_walkers must be even and at least 2·d + 2 = {2 * ndim + 2}, got {n}")
+        n = 2 * ndim + 2 if self.chain_walkers is None else _even_ensemble("chain_walkers", int(self.chain_walkers), ndim)
         return min(n, self.walkers(ndim))
 
     def make_moves(self, proposal: tuple | None = None) -> list:
