@@ -163,7 +163,10 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
                     break
             target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
             # one step at a time through the generator so the bar moves; the backend saves every step
-            for state in sampler.sample(state, iterations=target - it, skip_initial_state_check=resuming):
+            # emcee's check that the walkers span the space serves its ensemble moves; independent walkers
+            # (the independence move alone) may be fewer than the dimensions
+            skip = resuming or not settings.ensemble
+            for state in sampler.sample(state, iterations=target - it, skip_initial_state_check=skip):
                 bar.update(1)
                 it += 1
                 resuming = False

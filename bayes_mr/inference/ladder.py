@@ -20,7 +20,9 @@ Where its walkers start depends on the path:
   by side on an executor (:mod:`bayes_mr.executor`), with the same numbers
   either way (each rung's seed is its own child of the ladder's seed);
 * prior path: the walkers of each rung start where the chain of the rung
-  above ended (the power posteriors spread from the posterior to the prior
+  above ended, the first rung's at the posterior's last walkers (or, when
+  it has fewer than the rungs' ensemble needs, at draws spread over its
+  chain: :func:`_ensemble_start`; the power posteriors spread from the posterior to the prior
   box over 20 rungs; a rung near β = 0 started at the posterior would need a
   long burn-in), so these rungs run in order, in process.
 :func:`mean_variance` is the Monte Carlo variance of a rung's mean of g that
@@ -311,7 +313,8 @@ def run_ladder(
     g[0] = _exact_rung(tp, target, path, n_exact, np.random.default_rng(exact_seq))[:, None]
     rungs = list(range(K - 1, 0, -1))
     settings_k = {k: replace(settings, seed=temp_seqs[k]) for k in rungs}
-    for k, res in zip(rungs, _run_rungs(tp, betas, rungs, post[-1], settings_k, executor)):
+    top = post[-1] if path == "reference" else _ensemble_start(post, settings.walkers(post.shape[-1]))
+    for k, res in zip(rungs, _run_rungs(tp, betas, rungs, top, settings_k, executor)):
         gk = tp.g_from_lp(res.chain[res.burn:], res.log_prob[res.burn:], float(betas[k]))
         g[k], tau[k], chains[k] = gk, _tau(gk), res
     return Ladder(betas, g, tau, path, extra, extra_var, chains, _time.perf_counter() - t0)
@@ -351,9 +354,20 @@ def rung_chain(tp: _Path, beta: float, start: np.ndarray, settings: MCMCSettings
     else:
         # the power posteriors widen towards the prior box, which no Gaussian of the rung above fits
         proposal = None
-        settings = replace(settings, moves=local_moves(settings.moves))
+        settings = replace(settings, moves=local_moves(settings.adapt_moves))
     return sample(tp.density(beta), start.mean(axis=0), np.eye(start.shape[1]), settings, initial=start,
                   group=group, proposal=proposal)
+
+
+def _ensemble_start(post: np.ndarray, n: int) -> np.ndarray:
+    """``n`` walkers for the prior path's first rung from a posterior chain (n_steps, n_walkers, d): its last
+    walkers, and where the chain has fewer (a chain of independent walkers, ``MCMCSettings.moves``), draws
+    of theirs spread evenly over the chain, so that the ensemble's moves start from walkers spanning the
+    posterior."""
+    if post.shape[1] >= n:
+        return post[-1, :n]
+    flat = post.reshape(-1, post.shape[-1])
+    return flat[np.linspace(0, flat.shape[0] - 1, n).round().astype(int)[::-1]]
 
 
 def _top_rung(target, posterior: MCMCResult, path: str, ref_seq) -> tuple[Reference | None, np.ndarray, np.ndarray]:

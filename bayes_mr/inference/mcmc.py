@@ -25,11 +25,12 @@ With a wall-time budget (``max_seconds``) the chain is checked once more
 where the budget runs out, off the grid; a chain that meets the rule there is
 converged (``stopped`` "converged"), else it stopped on "max_seconds".
 
-Moves: an independence proposal (a t₂₀ with a defensive t₄ share) fitted to a pilot
-chain (70 %, :class:`~bayes_mr.inference.moves.Independence`), differential
-evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d)) and the DE snooker update
-(10 %, :class:`~bayes_mr.inference.moves.Snooker`). Without a ``proposal`` the
-run starts with a pilot of ``pilot_steps`` steps of the other moves alone; the
+Moves: the chain proper proposes from an independence proposal (a t₂₀ with a defensive t₄
+share, :class:`~bayes_mr.inference.moves.Independence`) alone (``moves``); the adaptation
+rounds mix it (70 %) with differential evolution (20 %, emcee ``DEMove``, γ₀ = 2.38/√(2d))
+and the DE snooker update (10 %, :class:`~bayes_mr.inference.moves.Snooker`)
+(``adapt_moves``). Without a ``proposal`` the
+run starts with a pilot of ``pilot_steps`` steps of the rounds' local moves alone; the
 mean and covariance of its second half, frozen from then on (a fixed
 proposal keeps the chain exact), make the proposal — a coordinate piled
 against a bound of the box in log-distance to it where that fits the pilot
@@ -39,7 +40,7 @@ normal's quantiles and a curved ridge straightened by a shear where either fits 
 (:mod:`bayes_mr.inference.proposal`), drawn only inside the box (a draw outside is drawn
 again: exact, and no evaluation is spent on a point the prior rejects; normalized-bouc-wen on
 the packaged damper: 1300 → 850 steps) — and the chain proper starts from the pilot's last
-walkers (the pilot is not part of the result).
+walkers (the pilot and the rounds are not part of the result).
 Measured on the bench's dahl posterior (6-d, 24 walkers, 25 s at 1 kHz):
 integrated time 21–24 steps with DE + snooker (3000 steps, 54 s) and 3.0–3.4
 with the pilot-fitted independence move (500 steps after a 500-step pilot,
@@ -51,8 +52,9 @@ the check falls every 50 steps (``check_every``), not 250. A proposal from
 the least-squares Laplace approximation
 instead made it *worse* (τ ≈ 35, acceptance 0.16): that posterior's mean sits
 1–2 SD from the optimum in two coordinates and its ln σ correlate with φ, so
-q must come from the chain. The local moves carry the chain where q fits
-badly (a curved valley, a posterior piled against a bound). DE and the
+q must come from the chain. In the rounds the local moves carry the walkers
+where q fits badly (a curved valley, a posterior piled against a bound) and
+the next q is fitted to where they went. DE and the
 snooker update (measured before the independence move): both are affine-invariant
 like the stretch move, but DE's scale is the optimal one for Gaussian targets
 in d dimensions while the stretch move's efficiency falls with d. Measured on
@@ -84,18 +86,28 @@ after three rounds it had not in 4000 (τ 25–56) — hence up to ten rounds.
 
 Walkers. The pilot and the rounds run 4·d walkers: differential evolution and the
 snooker update explore with the differences between walkers, and the proposal is
-fitted to their draws. The chain proper then keeps the first 2·d + 2 of them
-(``chain_walkers``; the fewest differential evolution allows): its independence
-move proposes from q whatever the number of walkers, and the rule's R-hat < 1.01
-asks ~125 τ of *every* walker (the walkers are its chains), so the chain's steps
-do not shrink with more walkers while each step costs one evaluation per walker.
-Measured on the main job's part A (seed 0, unbudgeted): normalized-bouc-wen
-met the rule in 350 steps of 16 walkers against 400 of 28 (τ 3.5 both), spencer
-in 850 of 30 against 900 of 56 (τ 8.5 against 7.2), bouc-wen in 4100 of 14
-against 2750 of 24 (τ 41 against 31: along its ridge the local moves carry more
-of the mixing, and they lose with fewer walkers) — 50 %, 49 % and 13 % fewer
-likelihood evaluations in the chain proper; normalized-bouc-wen's posterior
-means moved by at most 0.05 of a posterior SD.
+fitted to their draws. The chain proper then keeps the first
+:data:`~bayes_mr.inference.mcmc_settings.INDEPENDENT_WALKERS` (8) of them
+(``chain_walkers``): with the independence move alone every walker is a
+Metropolis–Hastings chain of its own, exact for the frozen q, so no rule ties their
+number to d; and the rule's R-hat < 1.01 asks ~125 τ of *every* walker (the walkers
+are its chains), so the chain's steps do not shrink with more walkers while each
+step costs one evaluation per walker. Measured on the main job's part A (seed 0,
+unbudgeted, the same pilot and rounds before each chain): spencer met the rule in
+1000 steps of 8 walkers (τ 11, acceptance 0.49) where the mixture above with 30
+walkers took 850–1300 (τ 8.5–11), 8000 likelihood evaluations against 26 000–39 000;
+normalized-bouc-wen 350 of 8 against 400 of 16 (τ 3.2 against 3.4); bouc-wen 550
+of 8 (τ 6.9, acceptance 0.52) against 4100 of 14 (τ 41). Posterior means agree
+within 0.1 posterior SD, and spencer's and normalized-bouc-wen's SDs within 7 %;
+bouc-wen's SDs of β₁, γ and n were 20 % *narrower* than the mixture's, and two
+checks say the mixture's were wrong: the same chain run to 3800 steps (τ 9.2) kept
+them, and importance sampling from q with its scale doubled (12 000 draws, ESS 886,
+no draw above 0.6 % of the weight) gave 0.56 against the chain's 0.55 and the
+mixture's 0.68 on β₁ — the mixture's 14 walkers drifting along the β₁ ≈ −γ ridge,
+slowly enough that R-hat over them passed. The failure the independence move alone
+risks is the opposite (a region q underweights, rarely visited, so the chain is too
+narrow and its τ does not show it); the defensive t₄ bounds p/q there, and the
+importance check above is the measurement on the posterior where it mattered.
 
 Randomness (:mod:`bayes_mr.inference.checkpoint`): ``seed`` seeds the initial
 walkers and the RandomState of emcee's moves, whose state the HDF5 backend
@@ -231,7 +243,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
         The chain's settings, its wall-time budget less what the pilot and rounds spent.
     """
     half = None if settings.max_seconds is None else 0.5 * settings.max_seconds
-    pilot_settings = replace(settings, moves=local_moves(settings.moves), max_seconds=half,
+    pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves), max_seconds=half,
                              max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
                              seed=_child(settings.seed, PILOT_KEY))
     part = sample(log_prob, x0_center, x0_cov, pilot_settings, names=names, initial=initial,
@@ -243,7 +255,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
         if left is not None and left <= 0:
             break
         n = settings.adapt_steps
-        round_settings = replace(settings, max_seconds=left, max_steps=n, check_every=n,
+        round_settings = replace(settings, moves=settings.adapt_moves, max_seconds=left, max_steps=n, check_every=n,
                                  seed=_child(settings.seed, PILOT_KEY - 1 - k))
         part = sample(log_prob, x0_center, x0_cov, round_settings, names=names, initial=part.chain[-1],
                       group=f"{group}_adapt{k}", proposal=proposal, bounds=bounds)

@@ -13,6 +13,13 @@ import numpy as np
 
 from .moves import DEFENSIVE_SHARE, MOVES, NEEDS_PROPOSAL, PROPOSAL_DF
 
+#: Walkers of a chain proper whose moves are all independence proposals (``chain_walkers``' default there):
+#: each walker is then a Metropolis–Hastings chain of its own, and R-hat compares them; at least
+#: :data:`MIN_CHAINS` (Vehtari et al. 2021 ask four chains of R-hat), eight so that its between-chain
+#: variance has 15 degrees of freedom over the split halves.
+INDEPENDENT_WALKERS = 8
+MIN_CHAINS = 4
+
 
 def _even_ensemble(name: str, n: int, ndim: int) -> int:
     """``n`` walkers if even and ≥ 2·d + 2 (red–blue half-ensembles spanning the space), else ValueError."""
@@ -49,7 +56,12 @@ class MCMCSettings:
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
-        Move names (:data:`~.moves.MOVES`) and weights.
+        Move names (:data:`~.moves.MOVES`) and weights of the chain (after a pilot: of the chain proper).
+        Default: the independence move alone, every walker a Metropolis–Hastings chain of its own
+        (:mod:`bayes_mr.inference.mcmc`, "Walkers").
+    adapt_moves : tuple of (str, float)
+        Moves of the adaptation rounds; the pilot runs those of them that need no proposal
+        (:func:`~.moves.local_moves`).
     pilot_steps : int
         Steps of the pilot chain that fits the independence move's proposal
         when :func:`~bayes_mr.inference.mcmc.sample` is given none (:mod:`bayes_mr.inference.mcmc`).
@@ -65,8 +77,10 @@ class MCMCSettings:
         (:data:`~.moves.DEFENSIVE_SHARE`; 0: none).
     chain_walkers : int or None
         Walkers of the chain proper after a pilot: the first this many of the ensemble the pilot and rounds
-        leave (:mod:`bayes_mr.inference.mcmc`, "Walkers"). Default: the fewest differential evolution allows,
-        2·d + 2 (at most the pilot's). Even and ≥ 2·d + 2; without a pilot the chain has :meth:`walkers` walkers.
+        leave (:mod:`bayes_mr.inference.mcmc`, "Walkers"). Default: :data:`INDEPENDENT_WALKERS` when ``moves``
+        are all independence proposals, else the fewest differential evolution allows, 2·d + 2 (at most the
+        pilot's). At least :data:`MIN_CHAINS`, and with ensemble moves even and ≥ 2·d + 2; without a pilot
+        the chain has :meth:`walkers` walkers.
     seed : int or SeedSequence
         Seed of the run (walker initialisation and moves).
     backend : str or Path or None
@@ -84,7 +98,8 @@ class MCMCSettings:
     max_steps: int = 20000
     max_seconds: float | None = None
     check_every: int = 50
-    moves: tuple[tuple[str, float], ...] = (("independence", 0.7), ("de", 0.2), ("snooker", 0.1))
+    moves: tuple[tuple[str, float], ...] = (("independence", 1.0),)
+    adapt_moves: tuple[tuple[str, float], ...] = (("independence", 0.7), ("de", 0.2), ("snooker", 0.1))
     pilot_steps: int = 200
     adapt_rounds: int = 10
     adapt_steps: int = 100
@@ -117,9 +132,21 @@ class MCMCSettings:
             return max(4 * ndim, 2 * ndim + 2)
         return _even_ensemble("n_walkers", int(self.n_walkers), ndim)
 
+    @property
+    def ensemble(self) -> bool:
+        """Whether a move of the chain uses the other walkers (all but the independence move do)."""
+        return any(name not in NEEDS_PROPOSAL for name, _ in self.moves)
+
     def walkers_after_pilot(self, ndim: int) -> int:
         """Walkers of the chain proper when a pilot ran (``chain_walkers``; at most :meth:`walkers`)."""
-        n = 2 * ndim + 2 if self.chain_walkers is None else _even_ensemble("chain_walkers", int(self.chain_walkers), ndim)
+        if self.ensemble:
+            n = 2 * ndim + 2 if self.chain_walkers is None else _even_ensemble("chain_walkers", int(self.chain_walkers),
+                                                                               ndim)
+        else:
+            n = INDEPENDENT_WALKERS if self.chain_walkers is None else int(self.chain_walkers)
+            if n < MIN_CHAINS:
+                raise ValueError(f"chain_walkers must be at least {MIN_CHAINS} (R-hat compares the walkers as "
+                                 f"chains), got {n}")
         return min(n, self.walkers(ndim))
 
     def make_moves(self, proposal: tuple | None = None) -> list:

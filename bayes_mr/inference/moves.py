@@ -88,8 +88,8 @@ class Independence(emcee.moves.MHMove):
     anywhere in the posterior, so successive positions are nearly
     independent — an integrated time of a few steps where the local
     differential-evolution moves need tens. Where q is a poor fit (a curved
-    valley) it is rejected more often and the ensemble's DE moves carry the
-    chain. q is a mixture of a t with ν = :data:`PROPOSAL_DF` and a defensive t₄ (:data:`DEFENSIVE_SHARE`
+    valley) it is rejected more often; in the adaptation rounds the ensemble's DE moves carry the
+    walkers there, and the next q is fitted to them. q is a mixture of a t with ν = :data:`PROPOSAL_DF` and a defensive t₄ (:data:`DEFENSIVE_SHARE`
     of it) of the same centre and scale: the t₂₀ accepts more often than a heavy-tailed t, the t₄ keeps
     the importance ratio p/q bounded where the target's tails outrun t₂₀ (measured at the constants).
 

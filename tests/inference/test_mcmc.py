@@ -55,7 +55,7 @@ def test_recovers_a_correlated_gaussian_within_monte_carlo_error():
     mu, C, P, log_prob = correlated_gaussian(5, seed=1)
     res = sample(log_prob, mu + 2 * np.sqrt(np.diag(C)), 4 * C, MCMCSettings(seed=7, progress=False))
     assert res.converged
-    assert res.chain.shape[1:] == (12, 5)  # the pilot's 20 walkers, the chain proper's 2·d + 2
+    assert res.chain.shape[1:] == (8, 5)  # the pilot's 20 walkers, the chain proper's eight independent ones
     assert res.n_steps - res.burn >= 50 * res.tau.max()
     z = (res.mean() - mu) / res.mcse()
     assert np.all(np.abs(z) < 2.88), z
@@ -325,12 +325,20 @@ def test_walker_count_rules():
         MCMCSettings(n_walkers=15).walkers(6)
     with pytest.raises(ValueError, match="2·d"):
         MCMCSettings(n_walkers=12).walkers(6)
-    # the chain proper after a pilot: 2·d + 2 by default, never more than the pilot's
-    assert MCMCSettings().walkers_after_pilot(6) == 14
-    assert MCMCSettings(chain_walkers=20).walkers_after_pilot(6) == 20
+    # the chain proper after a pilot: independent walkers (the independence move alone) by default, 8 of them
+    # whatever d, at least four (R-hat's chains), never more than the pilot's
+    assert not MCMCSettings().ensemble
+    assert MCMCSettings().walkers_after_pilot(6) == MCMCSettings().walkers_after_pilot(20) == 8
+    assert MCMCSettings(chain_walkers=5).walkers_after_pilot(6) == 5
     assert MCMCSettings(chain_walkers=40).walkers_after_pilot(6) == 24
+    with pytest.raises(ValueError, match="at least 4"):
+        MCMCSettings(chain_walkers=3).walkers_after_pilot(6)
+    # with ensemble moves in the chain: 2·d + 2 by default, even and at least that
+    mixed = MCMCSettings(moves=(("independence", 0.7), ("de", 0.3)))
+    assert mixed.ensemble and mixed.walkers_after_pilot(6) == 14
+    assert replace(mixed, chain_walkers=20).walkers_after_pilot(6) == 20
     with pytest.raises(ValueError, match="chain_walkers"):
-        MCMCSettings(chain_walkers=12).walkers_after_pilot(6)
+        replace(mixed, chain_walkers=12).walkers_after_pilot(6)
 
 
 # --- the package's posterior and its results -------------------------------------------
@@ -348,7 +356,7 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     lik = OutputError("dahl", rec)
     lsq = fit_lsq(lik)
     res = fit_mcmc(lik, lsq=lsq, settings=MCMCSettings(seed=0, progress=False, max_steps=200, check_every=100))
-    assert res.chain.shape == (200, 14, 6) and not res.converged  # 24 walkers in the pilot, 2·d + 2 after it
+    assert res.chain.shape == (200, 8, 6) and not res.converged  # 24 walkers in the pilot, eight independent after it
     idata = results.build(lik, mcmc_posterior(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)}))
     post = idata.posterior
     assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
