@@ -157,7 +157,7 @@ class Budget:
 #: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
 #: spencer ~5 min, the extension study's procedure from the comparison's optimum).
-FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=600.0,
+FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=720.0,
               evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
