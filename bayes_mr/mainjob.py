@@ -140,23 +140,24 @@ class Budget:
 #: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3). The simulator's RK4
 #: sub-steps are set by the model's stiffness, not by the sampling rate, so 1 kHz costs about what 250 Hz did
 #: (a 24-walker evaluation at the least-squares optima: dahl 65 against 62 ms, bouc-wen 663 against 757 ms).
-#: The emcee posteriors share one 600-s pool (``mcmc_pool_s``), the selected form's first, then by evidence
+#: The emcee posteriors share one 720-s pool (``mcmc_pool_s``), the selected form's first, then by evidence
 #: (:mod:`bayes_mr.mainjob_posteriors`); each runs until the package's rule holds (≥ 50 τ, R-hat < 1.01) or what
 #: the pool has left runs out. One whose measured step cost at its least-squares optimum projects the pilot and a
 #: minimal chain past that is not started, and a chain whose own integrated time projects the rule past it stops
 #: there (``stopped`` "projected"); the headline names either, with the numbers (:mod:`bayes_mr.inference.budget`).
-#: Measured (2 cores, warm kernels; each chain proper on 2·d + 2 walkers, ``MCMCSettings.chain_walkers``): the
-#: selected spencer converges in 436 s with its least squares — a 200-step pilot and three adaptation rounds of 56
-#: walkers (acceptance 0.13 → 0.34), then 1300 steps of 30, τ 11, R-hat 1.0096 binding (with walkers as chains,
-#: R-hat < 1.01 asks ~125 τ of every walker, whatever their number) — then normalized-bouc-wen (90 s), lugre (20 s)
-#: and dahl (24 s) in what is left; bouc-wen (six rounds of 24 walkers and ~4100 steps of 14 unbudgeted, ~7 min)
-#: does not fit in it, and the report says so. With 56 walkers in the chain (stop 48) spencer took 555-571 s and
-#: normalized-bouc-wen did not fit either; with 180 s per posterior (until then) spencer never started.
+#: Measured (2 cores, warm kernels; each chain proper the independence move alone on 8 walkers,
+#: ``MCMCSettings.moves``, ``chain_walkers``): all five converge in 531 s of the pool — the selected spencer in
+#: 241 s with its least squares (a 200-step pilot and three adaptation rounds of 56 walkers, acceptance
+#: 0.13 → 0.34, then 850 steps of 8, τ 7.5), normalized-bouc-wen 105 s, lugre 23 s, dahl 25 s and bouc-wen 122 s
+#: (six rounds of 24 walkers, then 650 steps of 8, τ 5.7). The pool's 720 s leave a margin for a slower machine
+#: (unbudgeted on part A the five took ~625 s in separate processes). With 2·d + 2 walkers and differential
+#: evolution in the chain (stop 50) spencer took 436 s and bouc-wen (~4100 steps of 14, ~7 min) did not fit in
+#: 600 s; with 180 s per posterior (until stop 48) spencer never started.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake
 #: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
 #: The diagnosis of the selected model runs on all of part A at 1 kHz (:attr:`Budget.diagnose_fs`; for
-#: spencer ~5 min, the extension study's procedure from the comparison's optimum).
+#: spencer 5-6 min, the extension study's procedure from the comparison's optimum).
 FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=720.0,
               evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
