@@ -140,6 +140,12 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
     timed_out = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_seconds", projection=None)
     chains, = _posterior_lines([timed_out], "spencer", {})
     assert "spencer (time limit: 1326 steps = 110 τ, R-hat 1.0109) NOT converged" in chains
+    # a chain of independent walkers that met the rule on a proposal with heavy-tailed weights
+    tails = dict(timed_out, n_steps=800, tau_max=9.0, rhat_max=1.008, stopped="q_tails", pareto_k=1.3)
+    chains, = _posterior_lines([tails], "spencer", {})
+    assert ("spencer (met the rule, but its proposals' importance weights have a Pareto k̂ of 1.3: the fitted "
+            "proposal underweights part of the posterior, so τ and R-hat do not bound its error: 800 steps = 89 τ, "
+            "R-hat 1.0080) NOT converged") in chains
 
 
 def test_an_unconverged_headline_names_the_shape_that_makes_the_chain_slow():

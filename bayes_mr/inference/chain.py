@@ -31,8 +31,9 @@ class MCMCResult:
     converged : bool
         The stopping rule was met.
     stopped : str
-        Why the run ended: ``"converged"``, ``"max_steps"``, ``"max_seconds"`` or
-        ``"projected"`` (the rule projected past ``max_seconds``; see ``projection``).
+        Why the run ended: ``"converged"``, ``"max_steps"``, ``"max_seconds"``,
+        ``"projected"`` (the rule projected past ``max_seconds``; see ``projection``) or ``"q_tails"``
+        (a chain of the independence move alone met the rule but its proposals' ``pareto_k`` did not).
     wall_s : float
         Wall time of this call, its pilot included (a resumed run counts only its own part) [s].
     seed_entropy : str
@@ -50,6 +51,9 @@ class MCMCResult:
         With ``stopped == "projected"``: ``tau_max``, ``steps_needed``,
         ``seconds_needed`` and ``budget_s``
         (:func:`bayes_mr.inference.convergence.projection`).
+    pareto_k : float
+        Pareto k̂ of the importance weights p/q of the independence move's proposals where a chain of that
+        move alone met the rule (:func:`bayes_mr.inference.convergence.tail_index`); NaN otherwise.
     """
 
     chain: np.ndarray
@@ -69,6 +73,7 @@ class MCMCResult:
     pilot_steps: int = 0
     adapt_acceptance: tuple[float, ...] = ()
     projection: dict | None = None
+    pareto_k: float = float("nan")
 
     @property
     def n_steps(self) -> int:

@@ -8,6 +8,12 @@ longest integrated time *and* every coordinate's rank-normalised split R-hat
 a sampler by that rule, within ``max_steps`` and an optional wall-time budget;
 with a budget, a chain whose own integrated time projects the rule past it
 stops at that check (:func:`projection`) instead of running into the limit.
+
+A chain of the independence move alone adds one condition (:func:`tail_index`): its
+proposals are draws of q, and the Pareto k̂ of their importance weights p/q (Vehtari et
+al. 2024, ArviZ's ``psislw``) must be below the sample-size bound :func:`tail_bound`
+when the rule is met. Above it p/q has a heavy tail: a region q underweights is visited
+rarely and held long, so the chain's τ and R-hat do not show how far its means can be off.
 """
 
 from __future__ import annotations
@@ -111,7 +117,41 @@ def projection(tau_max: float, step: int, steps_run: int, elapsed: float, budget
     return {"tau_max": tau_max, "steps_needed": need, "seconds_needed": seconds, "budget_s": budget}
 
 
-def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict, list[dict]]:
+#: Proposals a tail index needs before it can stop a chain (fewer: the condition is not applied). A run
+#: resumed from a checkpoint counts its own proposals only (they are not stored).
+TAIL_MIN_DRAWS = 200
+
+
+def tail_bound(n: int) -> float:
+    """Largest Pareto k̂ of n importance weights at which their estimates are reliable: min(1 − 1/log₁₀ n, 0.7)
+    (Vehtari et al. 2024, §3.2.3): 0.62 at 400 draws, 0.7 from ~2150."""
+    return min(1.0 - 1.0 / math.log10(max(n, 11)), 0.7)
+
+
+def tail_index(log_weights: list[np.ndarray]) -> tuple[float, int]:
+    """Pareto k̂ of importance weights (ArviZ's ``psislw``) and their number.
+
+    Parameters
+    ----------
+    log_weights : list of ndarray
+        ln p(x′) − ln q(x′) of draws x′ of q, in any chunks (an independence move's ``log_weights``).
+
+    Returns
+    -------
+    k : float
+        NaN with fewer than :data:`TAIL_MIN_DRAWS` draws.
+    n : int
+    """
+    lw = np.concatenate(log_weights) if log_weights else np.empty(0)
+    if lw.size < TAIL_MIN_DRAWS:
+        return math.nan, int(lw.size)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ArviZ warns above 0.7: the caller decides
+        k = _quiet_arviz().psislw(lw - lw.max())[1]
+    return float(k), int(lw.size)
+
+
+def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> tuple[dict, list[dict]]:
     """Advance an emcee sampler in blocks of ``check_every`` steps until the rule, ``max_steps`` or the budget.
 
     Checks fall at multiples of ``check_every`` counted from the chain's
@@ -127,16 +167,20 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
     settings : MCMCSettings
     resuming : bool
         The state comes from a checkpoint (emcee skips its initial-state check).
+    tail : callable, optional
+        ``tail() -> (k̂, n)``: the tail index of the proposals so far (:func:`tail_index`), for a chain of
+        the independence move alone; when the rule is met, k̂ above :func:`tail_bound` stops the chain
+        unconverged (``"q_tails"``).
 
     Returns
     -------
     diag : dict
         The last :func:`convergence_check`, with ``stopped`` (``"converged"``,
-        ``"max_steps"``, ``"max_seconds"`` or ``"projected"``: the rule
+        ``"max_steps"``, ``"max_seconds"``, ``"projected"``: the rule
         projected past the budget, :func:`projection`, whose dict is then
-        ``diag["projection"]``).
+        ``diag["projection"]``, or ``"q_tails"``) and ``pareto_k`` (NaN without ``tail``).
     history : list of dict
-        Each check: step, burn, tau_max, rhat_max.
+        Each check: step, burn, tau_max, rhat_max (and pareto_k where it was taken).
     """
     t0 = time.perf_counter()
     budget = math.inf if settings.max_seconds is None else float(settings.max_seconds)
@@ -150,13 +194,19 @@ def run_until_converged(sampler, state, settings, resuming: bool) -> tuple[dict,
                 diag = convergence_check(sampler.get_chain(), settings)
                 history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
                                 "rhat_max": float(diag["rhat"].max())})
+                diag["pareto_k"], tails = math.nan, False
+                if diag["converged"] and tail is not None:
+                    diag["pareto_k"], n = tail()
+                    history[-1]["pareto_k"] = diag["pareto_k"]
+                    tails = n >= TAIL_MIN_DRAWS and diag["pareto_k"] > tail_bound(n)
+                    diag["converged"] = not tails
                 bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
                                 N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
                                 rhat=f"{diag['rhat'].max():.3f}")
                 ahead = None if diag["converged"] else projection(
                     float(diag["tau"].max()), it, it - it0, time.perf_counter() - t0, budget, settings)
-                if diag["converged"] or it >= settings.max_steps or out_of_time or ahead:
-                    diag["stopped"] = ("converged" if diag["converged"]
+                if diag["converged"] or tails or it >= settings.max_steps or out_of_time or ahead:
+                    diag["stopped"] = ("converged" if diag["converged"] else "q_tails" if tails
                                        else "max_steps" if it >= settings.max_steps
                                        else "max_seconds" if out_of_time else "projected")
                     diag["projection"] = ahead if diag["stopped"] == "projected" else None

@@ -72,6 +72,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         "pilot_steps": result.pilot_steps, "adapt_acceptance": [float(a) for a in result.adapt_acceptance],
         "converged": bool(result.converged), "stopped": result.stopped, "seed_entropy": result.seed_entropy,
         "projection": result.projection,
+        "pareto_k": float(result.pareto_k) if np.isfinite(result.pareto_k) else None,
         "geometry": chain_geometry(result.chain[result.burn:], lik.lower, lik.upper, result.names, result.tau),
     }
     if lsq is not None:

@@ -153,7 +153,8 @@ def _multiple(value: float) -> str:
 
 
 #: Why an emcee chain stopped unconverged (its ``stopped``), in words: the headline and the bench table.
-STOP_REASONS = {"max_steps": "step limit", "max_seconds": "time limit", "projected": "projection"}
+STOP_REASONS = {"max_steps": "step limit", "max_seconds": "time limit", "projected": "projection",
+                "q_tails": "proposal's tails"}
 
 
 def _stop_reason(row: dict) -> str:
@@ -166,6 +167,9 @@ def _stop_reason(row: dict) -> str:
         return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps, a lower bound from a chain this "
                 f"short) projected the rule to at least ~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s "
                 f"against the {p['budget_s']:.0f} s left")
+    if row.get("stopped") == "q_tails" and row.get("pareto_k") is not None:
+        return (f"met the rule, but its proposals' importance weights have a Pareto k̂ of {fmt(row['pareto_k'], 2)}: "
+                f"the fitted proposal underweights part of the posterior, so τ and R-hat do not bound its error")
     return STOP_REASONS.get(row.get("stopped"), "budget")
 
 

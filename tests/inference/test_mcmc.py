@@ -360,12 +360,12 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     idata = results.build(lik, mcmc_posterior(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)}))
     post = idata.posterior
     assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
-    assert post.sizes["chain"] == 14
+    assert post.sizes["chain"] == 8
     ll = idata.log_likelihood
     assert ll.sizes["chain"] * ll.sizes["draw"] <= 200 and ll.sizes["obs"] <= 2000
     assert set(ll.data_vars) == {"displacement", "acceleration"}
     assert idata.posterior_predictive.sizes["draw"] <= 20
-    assert idata.sample_stats["lp"].shape == (14, post.sizes["draw"])
+    assert idata.sample_stats["lp"].shape == (8, post.sizes["draw"])
     assert len(idata.sample_stats.attrs["rhat"]) == 6
     s = results.summary_of(idata)
     assert s.engine == "mcmc" and s.log_evidence == pytest.approx(lsq.log_evidence)
