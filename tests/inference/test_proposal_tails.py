@@ -102,7 +102,8 @@ def test_a_chain_whose_proposal_underweights_the_target_is_not_converged():
 
 def test_the_tail_index_of_gaussian_importance_weights():
     """Weights p/q of N(0, 3²) against q = N(0, 1) have a Pareto tail of shape k = 1 − 1/9 = 0.89 (above every
-    bound: flagged; estimated 0.80 from these 4000 draws: k̂ is biased low at finite n); of N(0, 1) against q = N(0, 2²) they are bounded (k < 0: passes); fewer than
+    bound: flagged; estimated 0.80 from these 4000 draws: k̂ is biased low at finite n); of N(0, 1) against
+    q = N(0, 2²) they are bounded (k < 0: passes); fewer than
     :data:`TAIL_MIN_DRAWS` draws give no index. The bound is min(1 − 1/log₁₀ n, 0.7)."""
     x = np.random.default_rng(0).standard_normal(4000)
     lw = stats.norm(0, 3).logpdf(x) - stats.norm.logpdf(x)
