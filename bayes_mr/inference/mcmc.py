@@ -83,6 +83,16 @@ round and converges in 300–350 steps (τ 3.1–3.6) against 450 (4.1) without 
 packaged damper bouc-wen's walkers spread along its β₁ ≈ −γ ridge round after round, accepting 0.04 → 0.07
 → 0.12 → 0.24 → 0.35 → 0.38 over six rounds, and its chain then converged in 2750 steps (τ ≤ 31), where
 after three rounds it had not in 4000 (τ 25–56) — hence up to ten rounds.
+The chain proper proposes from q alone only where the adaptation *settled* (a whole round
+reached :data:`ADAPT_ACCEPT` or gained less than :data:`ADAPT_GAIN`; a round the budget
+cuts short is not refitted from); where the rounds or the budget ran out first, q may still be far from the target, and independent
+walkers would sit where it underweights it, so the chain keeps the rounds' mixture
+(``adapt_moves``, on 2·d + 2 walkers). Measured on the Bouc–Wen benchmark's posterior
+(the bench's case, 480 s, seed 0), where the budget leaves time for a round or two: run
+alone, after one round (accepting 0.08), a chain of 8 independent walkers reached τ 6.6
+and R-hat 1.013 in 954 steps; in the bench run its walkers stayed apart (R-hat 69 after
+650 steps, τ 31) — a q that depends on how many rounds the clock allowed. All five
+posteriors of the main job settle (each by one rule or the other).
 
 Walkers. The pilot and the rounds run 4·d walkers: differential evolution and the
 snooker update explore with the differences between walkers, and the proposal is
@@ -245,7 +255,8 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     acceptance : tuple of float
         Mean acceptance of each adaptation round.
     settings : MCMCSettings
-        The chain's settings, its wall-time budget less what the pilot and rounds spent.
+        The chain's settings, its wall-time budget less what the pilot and rounds spent, and the rounds'
+        moves (``adapt_moves``) where the adaptation did not settle (module docstring).
     """
     half = None if settings.max_seconds is None else 0.5 * settings.max_seconds
     pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves), max_seconds=half,
@@ -254,7 +265,7 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     part = sample(log_prob, x0_center, x0_cov, pilot_settings, names=names, initial=initial,
                   group=group + "_pilot", bounds=bounds)
     proposal = fit_proposal(_second_half(part), bounds)
-    spent, steps, acceptance = part.wall_s, part.n_steps, []
+    spent, steps, acceptance, settled = part.wall_s, part.n_steps, [], False
     for k in range(settings.adapt_rounds):
         left = None if half is None else half - spent
         if left is not None and left <= 0:
@@ -265,14 +276,17 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
         part = sample(log_prob, x0_center, x0_cov, round_settings, names=names, initial=part.chain[-1],
                       group=f"{group}_adapt{k}", proposal=proposal, bounds=bounds)
         spent, steps = spent + part.wall_s, steps + part.n_steps
-        if part.n_steps < 2:  # the budget ran out at once: nothing to refit from
+        if part.n_steps < n:  # the budget ran out in the round: too short to refit q from or to judge it by
             break
         proposal = fit_proposal(_second_half(part), bounds)
         acceptance.append(float(np.mean(part.acceptance)))
-        if acceptance[-1] >= ADAPT_ACCEPT or (k and acceptance[-1] < ADAPT_GAIN * acceptance[-2]):
+        settled = acceptance[-1] >= ADAPT_ACCEPT or (k and acceptance[-1] < ADAPT_GAIN * acceptance[-2])
+        if settled:
             break
     if settings.max_seconds is not None:
         settings = replace(settings, max_seconds=max(settings.max_seconds - spent, 0.0))
+    if not settled:  # q may still be far from the target: the chain keeps the rounds' local moves
+        settings = replace(settings, moves=settings.adapt_moves)
     chain_start = part.chain[-1, :settings.walkers_after_pilot(part.chain.shape[-1])]
     return chain_start, proposal, steps, tuple(acceptance), settings
 

@@ -121,6 +121,9 @@ def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow(monkeypatc
     acc = adapted.adapt_acceptance
     assert len(acc) >= 2 and acc[1] > acc[0], acc
     assert frozen.adapt_acceptance == () and frozen.pilot_steps == MCMCSettings().pilot_steps
+    # no round settled the frozen q: its chain keeps the rounds' mixture on 2·d + 2 walkers; the adapted one
+    # proposes from q alone on 8 independent walkers
+    assert frozen.n_walkers == 2 * 12 + 2 and adapted.n_walkers == 8, (frozen.n_walkers, adapted.n_walkers)
     assert adapted.tau.max() < frozen.tau.max()
     for res in (adapted, frozen):
         assert res.converged
