@@ -151,8 +151,8 @@ class Budget:
 #: 0.13 → 0.34, then 850 steps of 8, τ 7.5), normalized-bouc-wen 105 s, lugre 23 s, dahl 25 s and bouc-wen 122 s
 #: (six rounds of 24 walkers, then 650 steps of 8, τ 5.7); on the next machine of the same kind the same steps
 #: took 401 s (spencer 216 s) and the whole ``make run`` 13.9 min against 17.6. The pool's 720 s leave a margin
-#: for a slower machine (unbudgeted on part A the five took ~625 s in separate processes). With 2·d + 2 walkers and differential
-#: evolution in the chain (stop 50) spencer took 436 s and bouc-wen (~4100 steps of 14, ~7 min) did not fit in
+#: for a slower machine (unbudgeted on part A the five took ~625 s in separate processes). With 2·d + 2 walkers
+#: and differential evolution in the chain (stop 50) spencer took 436 s and bouc-wen (~4100 steps of 14, ~7 min) did not fit in
 #: 600 s; with 180 s per posterior (until stop 48) spencer never started.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake

@@ -85,8 +85,8 @@ packaged damper bouc-wen's walkers spread along its β₁ ≈ −γ ridge round 
 after three rounds it had not in 4000 (τ 25–56) — hence up to ten rounds.
 The chain proper proposes from q alone only where the adaptation *settled* (a whole round
 reached :data:`ADAPT_ACCEPT` or gained less than :data:`ADAPT_GAIN`; a round the budget
-cuts short is not refitted from); where the rounds or the budget ran out first, q may still be far from the target, and independent
-walkers would sit where it underweights it, so the chain keeps the rounds' mixture
+cuts short is not refitted from); where the rounds or the budget ran out first, q may
+still be far from the target, and independent walkers would sit where it underweights it, so the chain keeps the rounds' mixture
 (``adapt_moves``, on 2·d + 2 walkers). Measured on the Bouc–Wen benchmark's posterior
 (the bench's case, 480 s, seed 0), where the budget leaves time for a round or two: run
 alone, after one round (accepting 0.08), a chain of 8 independent walkers reached τ 6.6
