@@ -9,9 +9,19 @@ compiled again for that literal type — the layout becomes a compile-time const
 the branches of the effects the model does not have. The physics stays in one place: a new effect added to
 the generic kernel is specialised with no change here.
 
-Compiling one takes about a minute, so ``auto`` never waits for it: it starts the compile in a child process
+Compiling one takes about two minutes, so ``auto`` never waits for it: it starts the compile in a child process
 (:mod:`bayes_mr._compile_worker`) and runs the generic kernel until the child marks the machine code ready
 on disk (:class:`_Auto`).
+
+Nearly all of those two minutes are the physics inlined at numba-IR level (:data:`INLINE`): the same kernel with
+the layout constant and nothing inlined there, the *quick* kernel (:data:`QUICK_INLINE`), compiles in ~20 s.
+Measured on one core, structure test, in ns per sample (full specialised / quick / inlined / generic; compile of
+the first two 121-132 s against 20-23 s): dahl 43 / 72 / 86 / 171, bouc-wen 190 / 240 / 259 / 497, spencer
+356 / 351 / 438 / 616. So once a layout's work pays, ``auto`` compiles both: the quick kernel at once, and the
+full one at the lowest CPU priority (:data:`BACKGROUND_NICE`), on the cores the job leaves idle: it runs where it
+is ready (in a later process, or later in a long one) and never takes a core from the job that asked for it. On
+an empty cache ``make run`` spent 219 s more on spencer's posterior (418 against 199 s) while the full compile
+shared its two cores — for a kernel no faster than the quick one on that model.
 
 Between the two sits the *inlined* kernel (:func:`inlined`): the generic kernel with the per-sub-step
 physics inlined (:data:`INLINE`) but the layout still read at run time. One compile serves every model, so
@@ -31,13 +41,11 @@ kernel at once both succeed, and numba's own index writes are atomic too.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import inspect
 import os
 import pickle
 import subprocess
 import sys
-import tempfile
 import threading
 import types
 from contextlib import contextmanager
@@ -48,20 +56,23 @@ import numpy as np
 from numba import njit, typeof
 from numba.core.typing.typeof import Purpose
 
+from ._compile_worker import _load, _write_atomic, mark_ready, ready_path
+
 #: Environment variable naming the cache directory (generated kernels in its ``kernels`` subdirectory).
 CACHE_ENV = "BAYES_MR_CACHE"
 #: Environment variable choosing the kernels: ``auto`` (default), ``specialised`` or ``generic``.
 KERNELS_ENV = "BAYES_MR_KERNELS"
-#: ``auto``: a background compile of a layout's specialised kernel starts once this many sample-steps (samples ×
-#: parameter sets) have been asked of it in the process; one already compiled on disk for the call's argument types
-#: runs at once. A cold compile costs about a minute of one core per model and kernel (bench ``compile_s``) and saved
-#: ~110 ns per dahl sample-step (182 → 76 ns): it pays back in one process after ~5e8 steps and at once in later ones
-#: (the disk cache), so it starts at 2e8 — an emcee posterior or a 100-prior UKF training, not a least-squares fit
-#: or one of diagnose's dozens of candidate refits (on 2 cores the compile takes a core from them).
+#: ``auto``: background compiles of a layout's quick and full specialised kernels start once this many sample-steps
+#: (samples × parameter sets) have been asked of it in the process; one already compiled on disk for the call's
+#: argument types runs at once. The quick one costs ~20 s of one core and saves 80-260 ns per sample-step on the
+#: generic kernel (module docstring): it pays back within the process after ~1e8-2.5e8 steps and at once in later
+#: ones (the disk cache), so both start at 2e8 — an emcee posterior or a 100-prior UKF training, not a
+#: least-squares fit or one of diagnose's dozens of candidate refits. The full one (~2 min) uses idle cores only.
 AUTO_WORK = 2e8
 #: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this many
-#: sample-steps have been asked of the generic kernel in the process, over all layouts. ~40 s of one core once per
-#: machine, it halves the generic step (dahl 126 -> 60 ns): a diagnose or a few fits of a long record pay.
+#: sample-steps have been asked of the generic kernel in the process, over all layouts. ~140 s of one core once per
+#: machine (measured 141 s with the Rosenbrock branch; ~40 s before it), it takes the generic step 1.4-2× faster
+#: for every model (dahl 171 -> 86 ns): a diagnose — dozens of layouts, none worth its own compile — pays.
 INLINED_WORK = 2e7
 #: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to
 #: pay for any compile or long enough for its model's specialised kernel (``AUTO_WORK``), and the filter's
@@ -76,6 +87,11 @@ INLINED_TIER = ("run_batch",)
 #: loops (a dahl filter run on signal I 2.27 -> 1.68–1.82 µs per sample).
 INLINE = ("deriv", "deriv_pow", "forces", "rate", "substeps", "advance", "advance_points", "point_powers", "observe",
           "cholesky", "sigma_points", "moments", "sigma_thetas")
+#: Inlined in the *quick* kernel of a layout: nothing beyond what the source inlines (module docstring).
+QUICK_INLINE: tuple[str, ...] = ()
+#: CPU priority (``nice`` increment) of the background compile of a layout's full specialised kernel; the quick
+#: and the inlined kernels compile at the caller's priority.
+BACKGROUND_NICE = 19
 #: Inlined as well in a kernel specialised to one layout: the simulator's loop, into ``models.drivers.run_one``,
 #: whose one scratch array then keeps RK4's stages in registers (dahl structure step 31.8 -> 25.4 ns; in the
 #: inlined kernel, layout unknown, 47 -> 249 ns, so not there). The UKF's loop the same way: no gain.
@@ -86,7 +102,6 @@ _lock = threading.RLock()
 _work: dict[tuple, float] = {}
 _paths: dict[tuple, Path] = {}
 _started: set[Path] = set()
-_markers: dict[tuple, Path] = {}
 
 
 def cache_dir() -> Path:
@@ -195,20 +210,6 @@ def _source(dispatcher, lay: tuple[int, ...] | None, inline: tuple[str, ...]) ->
     )
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _lay_tuple(lay) -> tuple[int, ...] | None:
     return None if lay is None else tuple(int(v) for v in np.asarray(lay).ravel())
 
@@ -227,18 +228,6 @@ def module_path(dispatcher, lay, inline: tuple[str, ...] | None = None) -> Path:
     text = _source(dispatcher, lay_t, inline)
     key = hashlib.sha256((_fingerprint(dispatcher) + text).encode()).hexdigest()[:20]
     return cache_dir() / f"k_{dispatcher.py_func.__name__}_{'any_' if lay_t is None else ''}{key}.py"
-
-
-def _load(path: Path):
-    """The generated module at ``path`` (imported once per process)."""
-    name = f"bayes_mr_kernels_{path.stem}"
-    mod = sys.modules.get(name)
-    if mod is None:
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        sys.modules[name] = mod
-    return mod
 
 
 def _path(dispatcher, lay_t: tuple[int, ...] | None, inline: tuple[str, ...]) -> Path:
@@ -301,33 +290,17 @@ def inlined(dispatcher, inline: tuple[str, ...] | None = None):
     return specialised(dispatcher, None, inline)
 
 
-def ready_path(path: Path, argtypes: tuple) -> Path:
-    """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``; its name hashes
-    numba's cache directory (keyed on the package's sources, :mod:`bayes_mr._jit`) so that after an edit an old
-    marker cannot make ``auto`` compile in the calling process (it did: a compare's UKF row took 173 s, not 4)."""
-    key = (path, argtypes, numba.config.CACHE_DIR)
-    marker = _markers.get(key)  # memoised: every kernel call asks
-    if marker is None:
-        h = hashlib.sha256((repr(argtypes) + str(numba.config.CACHE_DIR)).encode()).hexdigest()[:12]
-        marker = _markers[key] = path.with_name(f"{path.stem}.{h}.ready")
-    return marker
-
-
-def mark_ready(marker: Path, name: str, argtypes: tuple) -> None:
-    """Write ``marker``: kernel ``name`` is in numba's disk cache for ``argtypes``."""
-    _write_atomic(marker, f"{name} {argtypes!r}\n")
-
-
-def _start_background(dispatcher, lay_t: tuple[int, ...] | None, argtypes: tuple) -> None:
-    """Compile the specialised kernel (``lay_t`` None: the inlined one) for ``argtypes`` in another process
-    (once per process and types).
+def _start_background(dispatcher, lay_t: tuple[int, ...] | None, argtypes: tuple,
+                      inline: tuple[str, ...] | None = None, nice: int = 0) -> None:
+    """Compile the specialised kernel (``lay_t`` None: the inlined one; ``inline`` as for :func:`specialised`)
+    for ``argtypes`` in another process (once per process and types), ``nice`` steps below this one's priority.
 
     The child (:mod:`bayes_mr._compile_worker`) writes numba's cache and then
     the :func:`ready_path` marker; its stderr goes to ``<module>.log``. It is
     in the caller's process group, so an interrupt stops it with the caller;
     a caller that ends normally leaves it to finish for the next process.
     """
-    path = _generated(dispatcher, lay_t, _inline_for(lay_t, None))
+    path = _generated(dispatcher, lay_t, _inline_for(lay_t, inline))
     marker = ready_path(path, argtypes)
     with _lock:
         if marker in _started:
@@ -339,24 +312,25 @@ def _start_background(dispatcher, lay_t: tuple[int, ...] | None, argtypes: tuple
     env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(numba.config.CACHE_DIR).parent))
     with open(path.with_suffix(".log"), "a") as log:
         subprocess.Popen([sys.executable, "-m", "bayes_mr._compile_worker", str(path), dispatcher.py_func.__name__,
-                          str(types_file), str(marker)], stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env)
+                          str(types_file), str(marker), str(int(nice))],
+                         stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env)
 
 
 class _Auto:
     """A kernel that runs the generic code until a faster twin is compiled, in the background.
 
     Called like the generic kernel. On each call it types the arguments and
-    runs the fastest kernel ready on disk for those types: the model's
-    specialised kernel, else the inlined one (:func:`inlined`, any model),
-    else the generic kernel (loading one costs milliseconds). Once the work
-    asked of the layout has passed :data:`AUTO_WORK` (``pays``) it starts a
-    background compile of the specialised kernel, or, short of that, once the
-    work asked of the kernel over all layouts has passed
+    runs the fastest kernel ready on disk for those types: the model's full
+    specialised kernel, else its quick one (:data:`QUICK_INLINE`), else the
+    inlined one (:func:`inlined`, any model), else the generic kernel (loading
+    one costs milliseconds). Once the work asked of the layout has passed
+    :data:`AUTO_WORK` (``pays``) it starts background compiles of the quick
+    kernel and, at :data:`BACKGROUND_NICE`, of the full one; short of that,
+    once the work asked of the kernel over all layouts has passed
     :data:`INLINED_WORK` (``pays_inlined``), of the inlined one — so a long
-    job speeds up part-way instead of stopping for the minute or so a compile
-    takes. ``eager`` (the ``specialised`` or ``inlined`` choice) runs that
-    kernel, compiled in this process if need be, and marks it ready for later
-    ``auto`` calls.
+    job speeds up part-way instead of stopping for a compile. ``eager`` (the
+    ``specialised`` or ``inlined`` choice) runs that kernel, compiled in this
+    process if need be, and marks it ready for later ``auto`` calls.
     """
 
     __slots__ = ("dispatcher", "lay", "pays", "pays_inlined", "eager")
@@ -369,18 +343,25 @@ class _Auto:
     def __call__(self, *args):
         argtypes = tuple(typeof(a, Purpose.argument) for a in args)
         d = self.dispatcher
-        tiers = {"specialised": (self.lay,), "inlined": (None,)}.get(self.eager, (self.lay, None))
-        for lay in tiers:
+        if self.eager:
+            lay = self.lay if self.eager == "specialised" else None
+            out = specialised(d, lay)(*args)
             marker = ready_path(_path(d, lay, _inline_for(lay, None)), argtypes)
-            if self.eager or marker.exists():
-                if lay is None and self.pays:
-                    _start_background(d, self.lay, argtypes)  # the inlined kernel runs meanwhile
-                out = specialised(d, lay)(*args)
-                if not marker.exists():
-                    mark_ready(marker, d.py_func.__name__, argtypes)
-                return out
-        if self.pays or self.pays_inlined:
-            _start_background(d, self.lay if self.pays else None, argtypes)
+            if not marker.exists():
+                mark_ready(marker, d.py_func.__name__, argtypes)
+            return out
+        # fastest first: (layout, inlined functions) of the full, the quick and the any-layout kernel
+        tiers = ((self.lay, _inline_for(self.lay, None)), (self.lay, QUICK_INLINE), (None, _inline_for(None, None)))
+        ready = [ready_path(_path(d, lay, inline), argtypes).exists() for lay, inline in tiers]
+        if self.pays and not ready[0]:
+            _start_background(d, self.lay, argtypes, nice=BACKGROUND_NICE)
+            if not ready[1]:
+                _start_background(d, self.lay, argtypes, inline=QUICK_INLINE)
+        elif self.pays_inlined and not any(ready):
+            _start_background(d, None, argtypes)
+        for (lay, inline), ok in zip(tiers, ready):
+            if ok:
+                return specialised(d, lay, inline)(*args)
         return d(*args)
 
 
@@ -418,9 +399,10 @@ def kernel(dispatcher, lay, work: float = 0.0):
     suite uses it); ``specialised`` and ``inlined`` always run that kernel,
     compiled in the calling process if need be (and mark it ready for
     ``auto``); ``auto`` (default) runs the fastest one compiled on disk for
-    the call's argument types, and starts background compiles once the work
-    pays (:data:`AUTO_WORK`; :data:`INLINED_WORK` for the kernels of
-    :data:`INLINED_TIER`; :class:`_Auto`).
+    the call's argument types — full specialised, quick specialised
+    (:data:`QUICK_INLINE`), inlined, generic — and starts background
+    compiles once the work pays (:data:`AUTO_WORK`; :data:`INLINED_WORK` for
+    the kernels of :data:`INLINED_TIER`; :class:`_Auto`).
 
     Parameters
     ----------

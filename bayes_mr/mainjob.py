@@ -52,6 +52,7 @@ from .identify import UKF, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
 from .mainjob_posteriors import posterior_order, run_posteriors
 from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
+from .warmup import compile_filter_aside, wait
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -169,11 +170,23 @@ QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),
 
 
 def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
-    """Every form × engine on A, validated on B: least squares and the UKF of every form, then the emcee
-    posteriors from one pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
-    first = compare(part_a, list(budget.forms), engines=("lsq", "ukf"), validate=part_b, seed=seed, progress=say,
-                    estimators={"lsq": LeastSquares(), "ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)},
-                    noise=budget.noise)
+    """Every form × engine on A, validated on B: least squares of every form, then the UKF of every form (its
+    filter compiled meanwhile in a child process, :mod:`bayes_mr.warmup`), then the emcee posteriors from one
+    pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
+    forms = list(budget.forms)
+    child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus, out_dir / "warmup.log")
+    passes = {}
+    for label, est in (("lsq", LeastSquares()), ("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus))):
+        if label == "ukf":
+            waited = wait(child)
+            if waited >= 1.0:
+                say(f"waited {waited:.0f} s for the UKF filter's compile (bayes_mr.warmup; an empty kernel cache)")
+        passes[label] = compare(part_a, forms, engines=(label,), validate=part_b, seed=seed, progress=say,
+                                estimators={label: est}, noise=budget.noise)
+    by_pair = {(r["model"], r["engine"]): r for p in passes.values() for r in p["rows"]}
+    first_rows = [by_pair[(m, e)] for m in forms for e in passes]
+    first = {"rows": first_rows, **choose(first_rows, forms),
+             "idata": {k: v for p in passes.values() for k, v in p["idata"].items()}}
     order = posterior_order(budget.forms, first["selected"], first["bayes_factors"])
     if budget.mcmc_pool_s is not None:
         say(f"emcee posteriors from a pool of {budget.mcmc_pool_s:g} s, in this order: {', '.join(order)}")

@@ -112,7 +112,8 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
     monkeypatch.setattr(S, "_work", {})
     monkeypatch.setattr(S, "INLINED_TIER", ("mass",))
     started = []
-    monkeypatch.setattr(S, "_start_background", lambda d, l, t: started.append((l, t)))
+    monkeypatch.setattr(S, "_start_background",
+                        lambda d, l, t, inline=None, nice=0: started.append((l, t, inline, nice)))
     args = _mass_args("lugre+force_offset", "device")
     assert S.kernel(mass, args[0], work=S.INLINED_WORK / 2)(*args) == mass(*args)
     assert started == []
@@ -122,7 +123,10 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
     assert len(started) == 1 and started[0][0] is None and len(started[0][1]) == 3  # the argument types
     k = S.kernel(mass, args[0], work=S.AUTO_WORK)
     assert k(*args) == mass(*args) and k.dispatcher is mass  # the generic kernel ran this call
-    assert len(started) == 2 and started[1][0] == tuple(int(v) for v in args[0])  # then the specialised one
+    # then the layout's full specialised kernel at the lowest priority, and its quick one (nothing inlined) at ours
+    lay = tuple(int(v) for v in args[0])
+    assert started[1:] == [(lay, started[1][1], None, S.BACKGROUND_NICE), (lay, started[1][1], S.QUICK_INLINE, 0)]
+    assert len(started) == 3
 
 
 def _mass_args(name: str, kind: str) -> tuple:
@@ -139,12 +143,14 @@ def test_background_compile_is_used_once_ready(monkeypatch, cache):
     args = _mass_args("dahl", "structure")
     lay = args[0]
     assert S.kernel(mass, lay, work=2 * S.AUTO_WORK)(*args) == mass(*args)
-    (marker,) = [m for m in S._started if str(cache) in str(m)]
-    for _ in range(300):
-        if marker.exists():
-            break
-        time.sleep(0.5)
-    assert marker.exists(), marker.with_name(marker.name.split(".")[0] + ".log").read_text()
+    markers = [m for m in S._started if str(cache) in str(m)]
+    assert len(markers) == 2  # the full kernel (at low priority) and the quick one
+    for marker in markers:
+        for _ in range(300):
+            if marker.exists():
+                break
+            time.sleep(0.5)
+        assert marker.exists(), marker.with_name(marker.name.split(".")[0] + ".log").read_text()
     assert S.kernel(mass, lay)(*args) == mass(*args)
     fn = S.specialised(mass, lay)
     assert sum(fn.stats.cache_hits.values()) == 1 and not fn.stats.cache_misses
@@ -242,5 +248,5 @@ def test_specialised_choice_compiles_here_and_marks_it_ready_for_auto(monkeypatc
     assert S.kernel(mass, args[0])(*args) == mass(*args)
     monkeypatch.setenv(S.KERNELS_ENV, "auto")
     monkeypatch.setattr(S, "_start_background", lambda *a: pytest.fail("no compile needed: it is ready"))
-    monkeypatch.setattr(S, "specialised", lambda d, l: (lambda *a: "specialised ran"))
+    monkeypatch.setattr(S, "specialised", lambda d, l, inline=None: (lambda *a: "specialised ran"))
     assert S.kernel(mass, args[0], work=2 * S.AUTO_WORK)(*args) == "specialised ran"
