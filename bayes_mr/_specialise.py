@@ -71,8 +71,8 @@ KERNELS_ENV = "BAYES_MR_KERNELS"
 AUTO_WORK = 2e8
 #: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this many
 #: sample-steps have been asked of the generic kernel in the process, over all layouts. ~140 s of one core once per
-#: machine (measured 141 s with the Rosenbrock branch; ~40 s before it), it takes the generic step 1.4-2× faster
-#: for every model (dahl 171 -> 86 ns): a diagnose — dozens of layouts, none worth its own compile — pays.
+#: machine (141 s measured alone, dahl structure test; ~40 s when this tier was added), it takes the generic step
+#: 1.4-2× faster for every model (dahl 171 -> 86 ns): a diagnose — dozens of layouts, none worth its own compile — pays.
 INLINED_WORK = 2e7
 #: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to
 #: pay for any compile or long enough for its model's specialised kernel (``AUTO_WORK``), and the filter's

@@ -57,7 +57,7 @@ from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
 from .scores import force_nrmse
-from .models import FORMS
+from .models import FORMS, get_model
 from .progress import say as progress_say
 from .report.run import report_markdown, run_figures, spencer_table
 from .scores import score
@@ -173,7 +173,7 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
     """Every form × engine on A, validated on B: least squares of every form, then the UKF of every form (its
     filter compiled meanwhile in a child process, :mod:`bayes_mr.warmup`), then the emcee posteriors from one
     pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
-    forms = list(budget.forms)
+    forms = [get_model(m).name for m in budget.forms]  # as compare names its rows
     child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus, out_dir / "warmup.log")
     passes = {}
     for label, est in (("lsq", LeastSquares()), ("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus))):
