@@ -351,18 +351,16 @@ class _Auto:
                 mark_ready(marker, d.py_func.__name__, argtypes)
             return out
         # fastest first: (layout, inlined functions) of the full, the quick and the any-layout kernel
-        tiers = ((self.lay, _inline_for(self.lay, None)), (self.lay, QUICK_INLINE), (None, _inline_for(None, None)))
-        ready = [ready_path(_path(d, lay, inline), argtypes).exists() for lay, inline in tiers]
-        if self.pays and not ready[0]:
+        full, quick, _ = tiers = ((self.lay, _inline_for(self.lay, None)), (self.lay, QUICK_INLINE),
+                                  (None, _inline_for(None, None)))
+        best = next((t for t in tiers if ready_path(_path(d, *t), argtypes).exists()), None)
+        if self.pays and best is not full:
             _start_background(d, self.lay, argtypes, nice=BACKGROUND_NICE)
-            if not ready[1]:
+            if best is not quick:
                 _start_background(d, self.lay, argtypes, inline=QUICK_INLINE)
-        elif self.pays_inlined and not any(ready):
+        elif self.pays_inlined and best is None:
             _start_background(d, None, argtypes)
-        for (lay, inline), ok in zip(tiers, ready):
-            if ok:
-                return specialised(d, lay, inline)(*args)
-        return d(*args)
+        return d(*args) if best is None else specialised(d, *best)(*args)
 
 
 @contextmanager

@@ -174,13 +174,11 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
     filter compiled meanwhile in a child process, :mod:`bayes_mr.warmup`), then the emcee posteriors from one
     pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
     forms = [get_model(m).name for m in budget.forms]  # as compare names its rows
-    child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus, out_dir / "warmup.log")
+    child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus)
     passes = {}
     for label, est in (("lsq", LeastSquares()), ("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus))):
         if label == "ukf":
-            waited = wait(child)
-            if waited >= 1.0:
-                say(f"waited {waited:.0f} s for the UKF filter's compile (bayes_mr.warmup; an empty kernel cache)")
+            wait(child, say)
         passes[label] = compare(part_a, forms, engines=(label,), validate=part_b, seed=seed, progress=say,
                                 estimators={label: est}, noise=budget.noise)
     by_pair = {(r["model"], r["engine"]): r for p in passes.values() for r in p["rows"]}

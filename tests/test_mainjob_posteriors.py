@@ -8,6 +8,7 @@ from records import offset_device_record
 from bayes_mr.inference.mcmc import MCMCSettings
 from bayes_mr.mainjob import FULL, QUICK, Budget
 from bayes_mr.mainjob_posteriors import posterior_order, run_posteriors
+from bayes_mr.warmup import compile_filter_aside, wait
 
 
 def test_the_selected_form_runs_first_then_the_evidence_decides():
@@ -55,3 +56,13 @@ def test_the_cli_refuses_a_pool_that_is_not_positive(capsys):
 
     assert main(["run", "--quick", "--mcmc-pool", "0", "--out", "unused", "--no-readme", "--quiet"]) == 2
     assert "mcmc_pool_s must be positive" in capsys.readouterr().err
+
+
+def test_a_failed_filter_warm_up_is_reported_not_raised():
+    """The child that compiles the UKF filter aside (bayes_mr.warmup) only saves time: when it fails, the job is
+    told why and goes on (its first UKF fit compiles the filter itself)."""
+    said = []
+    child = compile_filter_aside(offset_device_record(1.6, fs=250.0), "no-such-form", 1, (0.01,))
+    error = wait(child, said.append)
+    assert error is not None and "no-such-form" in error
+    assert said == [f"the UKF filter's compile aside failed ({error}); the first UKF fit compiles it"]
