@@ -68,9 +68,11 @@ def jittered_cholesky(cov) -> np.ndarray:
 #: banana of ``tests/inference/test_shear.py`` t₂₀ alone needed 2250, > 20 000 and 2300 steps (seeds 4-6;
 #: τ up to 405) where t₄ needed 500, 2650, 1150. Hence the defensive mixture below (Hesterberg 1995): with
 #: it, 1100, 850, 1350 steps there, and spencer's chain accepted 0.38 and converged after 900 steps
-#: (τ 5.6–7.6; t₄ alone: 2100, τ 7–11). Those with the DE mixture in the chain; with the independence move
-#: alone (the chain since stop 51) t₂₀ alone met the rule on seed 5 with a mean 13 MCSE off, the mixture
-#: in 750, 650, 2100 steps with honest means (seeds 4-6; ``tests/inference/test_proposal_tails.py``).
+#: (τ 5.6–7.6; t₄ alone: 2100, τ 7–11). Those with the DE mixture in the chain and on seeds picked on another
+#: CPU; with the independence move alone (the chain since stop 51), seeds 0-29 on this machine's, the banana
+#: does not separate the two: both call 2-3 of 30 chains converged with a mean over 8 MCSE off. What the t₄
+#: does for certain is bound the weights p/q where p's tails outrun t₂₀'s: Pareto k 1/4 against 17/20 for a
+#: t₃ target (``tests/inference/test_proposal_tails.py``).
 PROPOSAL_DF = 20.0
 #: Share and ν of the heavy-tailed component mixed into :class:`Independence`'s q
 #: (``MCMCSettings.defensive_share``): q = 0.8 t₂₀ + 0.2 t₄ bounds p/q by p/(0.2 t₄) wherever the target's

@@ -1,5 +1,5 @@
 """The independence proposal's tails: the settings reach the move, q is the normalised t₂₀ + t₄ mixture, a
-target heavier tailed than q is sampled exactly, the defensive t₄ keeps a light-tailed q from sticking, and a chain
+target heavier tailed than q is sampled exactly, the defensive t₄ bounds the importance weights' tail, and a chain
 whose proposals' importance weights have a heavy tail is not called converged."""
 
 import numpy as np
@@ -78,17 +78,22 @@ def _banana(seed, **kw):
     return res, (res.mean() - np.array([0.0, B])) / res.mcse()
 
 
-def test_the_defensive_component_keeps_a_light_tailed_proposal_from_sticking():
-    """With t₂₀ alone a walker that reaches the banana's tail, which q underweights, is held there: seed 5 meets
-    the rule after 1450 steps with a mean 13 MCSE off (seeds 0-9: 2 and 5 so, 8 and 13 MCSE; 3 and 7 not
-    converged in 5000 steps, τ up to 76). With the defensive t₄ share (the default) seeds 4-6 converge in 750,
-    650 and 2100 steps and keep the banana's means (within 1.5 MCSE; seeds 0-9: 8 converged, none beyond 3)."""
-    light, z = _banana(5, defensive_share=0.0, max_steps=5000)
-    assert light.converged and np.max(np.abs(z)) > 8, z
-    for seed in (4, 5, 6):
-        res, z = _banana(seed, max_steps=3000)
-        assert res.converged, (seed, res.tau)
-        assert np.all(np.abs(z) < 3.3), (seed, res.mean(), res.mcse())
+def test_the_defensive_component_bounds_the_weights_of_a_heavier_tailed_target():
+    """Against the t₃ target the importance weights p/q of t₂₀ alone grow as |x|¹⁷ where q's draws thin as
+    |x|⁻²⁰: a Pareto tail k = 17/20 = 0.85, beyond the chain's tail bound (0.7), so such a chain would stop on
+    q's tails (or, shorter, stick where q underweights p). With the defensive t₄ share the weights grow as |x|
+    where q thins as |x|⁻⁴: k = 1/4. Measured on 200 000 draws of q, seeds 0-4 (k̂ is biased low at finite n):
+    t₂₀ alone 0.64-0.77, with the default share −0.01 to 0.13. A proposal without the t₄, or one whose t₄ is
+    not in its density, fails. (Whole chains on the banana of ``test_shear`` do not separate the two: over seeds
+    0-29, both call 2-3 chains converged with means over 8 MCSE off — the rule's blind spot on a target's
+    unvisited tail, noted on issue 16.)"""
+    for seed in range(5):
+        k = {}
+        for share in (DEFENSIVE_SHARE, 0.0):
+            move = Independence(np.zeros(3), SCALE, df=PROPOSAL_DF, defensive=share)
+            x = move._draw(200_000, np.random.RandomState(seed))
+            k[share], _ = tail_index([log_t3(x) - move.log_density(x)])
+        assert k[DEFENSIVE_SHARE] < 0.3 and k[0.0] > 0.5, (seed, k)
 
 
 def test_a_chain_whose_proposal_underweights_the_target_is_not_converged():
