@@ -363,6 +363,18 @@ class _Auto:
         return d(*args) if best is None else specialised(d, *best)(*args)
 
 
+def expect_work(dispatcher, lay, work: float) -> None:
+    """Count ``work`` sample-steps this process will ask of ``dispatcher`` for layout ``lay`` before it asks them.
+
+    For a job that knows it will run a long fit of a model (the main job's posteriors): under ``auto`` the next
+    call for that layout starts the background compiles the work pays for (:data:`AUTO_WORK`) at once, and the
+    fit then has its model's own kernel from its start, not from part-way through.
+    """
+    key = (id(dispatcher), _lay_tuple(lay))
+    with _lock:
+        _work[key] = _work.get(key, 0.0) + float(work)
+
+
 @contextmanager
 def compiled_here(mode: str = "specialised"):
     """Under ``auto``, compile the block's kernels in this process and mark them ready (``mode``).

@@ -17,7 +17,8 @@ from .executor import Outcome
 from .identify import Identify
 from .identify import validate as validate_fit
 from .inference.estimators import Emcee, LeastSquares, engine
-from .inference.lsq import fit_lsq
+from .inference.lsq import LSQResult, fit_lsq
+from .likelihood import OutputError
 from .models import get_model
 
 
@@ -32,6 +33,11 @@ def _failed(model: str, engine_name: str, error: str, wall_s: float) -> tuple[di
 
 def _why(exc: Exception) -> str:
     return f"{type(exc).__name__}: {exc}"
+
+
+def error_row(model: str, engine_name: str, exc: Exception, wall_s: float) -> dict:
+    """The row of a fit that raised ``exc`` after ``wall_s`` seconds (as every job of the grid makes it)."""
+    return _failed(model, engine_name, _why(exc), wall_s)[0]
 
 
 def _row(idata, validate: xr.Dataset | None) -> tuple[dict, object]:
@@ -63,27 +69,42 @@ def shares_lsq(lsq, mcmc, seed: int) -> bool:
             and lsq.settings == mcmc.lsq_settings(seed))
 
 
+def least_squares(model: str, lsq, record: xr.Dataset, noise: str = "iid") -> tuple[OutputError, LSQResult]:
+    """The likelihood of ``model`` on ``record`` and its least-squares fit: what a model's ``lsq`` row and its
+    chain share (:func:`lsq_mcmc_job`). Raises what the fit raises (:data:`FIT_ERRORS`)."""
+    lik = Identify(model, lsq, noise=noise).likelihood(record)
+    return lik, fit_lsq(lik, lsq.settings)
+
+
 def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
-                 progress: bool, noise: str = "iid") -> list[tuple[dict, object]]:
+                 progress: bool, noise: str = "iid",
+                 fitted: tuple[OutputError, LSQResult] | None = None) -> list[tuple[dict, object]]:
     """The ``lsq`` and ``mcmc`` rows of one model from one least-squares fit: [(row, InferenceData)] × 2.
 
     The chain starts from least squares' optimum (:meth:`~bayes_mr.inference.estimators.Emcee.fit_from`);
     when the ``lsq`` row's settings are those the chain would use (:func:`shares_lsq`) the fit is made once,
     not once per row — the same numbers as :func:`fit_job` twice. Each row's ``wall_s`` counts the shared fit,
     as it did when each made its own. A failure is a row with ``error``, as in :func:`fit_job`.
+
+    ``fitted``: that fit already made on ``record`` (:func:`least_squares`; the main job's first pass), not made
+    again — its seconds (``LSQResult.wall_s``) count as above. ``mcmc`` None: the ``lsq`` row alone.
     """
     t0 = _time.perf_counter()
-    ident = Identify(model, lsq, noise=noise)
-    try:
-        lik = ident.likelihood(record)
-        res = fit_lsq(lik, lsq.settings)
-    except FIT_ERRORS as exc:
-        wall = _time.perf_counter() - t0
-        return [_failed(model, lsq.name, _why(exc), wall), _failed(model, mcmc.name, _why(exc), wall)]
-    t_lsq = _time.perf_counter() - t0
+    if fitted is None:
+        try:
+            fitted = least_squares(model, lsq, record, noise)
+        except FIT_ERRORS as exc:
+            wall = _time.perf_counter() - t0
+            return [_failed(model, est.name, _why(exc), wall) for est in (lsq, mcmc) if est is not None]
+        t_lsq = _time.perf_counter() - t0
+    else:
+        t_lsq = fitted[1].wall_s
+    lik, res = fitted
     out = []
     for est, fit in ((lsq, lambda: lsq.posterior(lik, res, seed=seed)),
                      (mcmc, lambda: mcmc.fit_from(lik, res, seed=seed, progress=progress))):
+        if est is None:
+            continue
         t1 = _time.perf_counter()
         try:
             idata = results.build(lik, fit())

@@ -50,9 +50,9 @@ from .comparison import choose, compare, row_of, simulating_point, table
 from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
 from .identify import UKF, Identify, LeastSquares, predict
 from .mainjob_context import noise_sensitivity, published_spencer
-from .mainjob_posteriors import posterior_order, run_posteriors
+from .mainjob_posteriors import least_squares_pass, posterior_order, run_posteriors
 from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
-from .warmup import compile_filter_aside, wait
+from .warmup import compile_filter_aside, expect_posteriors, wait
 from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
@@ -175,21 +175,18 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
     pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
     forms = [get_model(m).name for m in budget.forms]  # as compare names its rows
     child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus)
-    passes = {}
-    for label, est in (("lsq", LeastSquares()), ("ukf", UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus))):
-        if label == "ukf":
-            wait(child, say)
-        passes[label] = compare(part_a, forms, engines=(label,), validate=part_b, seed=seed, progress=say,
-                                estimators={label: est}, noise=budget.noise)
-    by_pair = {(r["model"], r["engine"]): r for p in passes.values() for r in p["rows"]}
-    first_rows = [by_pair[(m, e)] for m in forms for e in passes]
-    first = {"rows": first_rows, **choose(first_rows, forms),
-             "idata": {k: v for p in passes.values() for k, v in p["idata"].items()}}
+    expect_posteriors(part_a, forms, budget.mcmc)
+    lsq_rows, lsq_idata, fitted = least_squares_pass(part_a, part_b, forms, seed=seed, noise=budget.noise, say=say)
+    wait(child, say)
+    ukf = compare(part_a, forms, engines=("ukf",), validate=part_b, seed=seed, progress=say,
+                  estimators={"ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)}, noise=budget.noise)
+    by_pair = {(r["model"], r["engine"]): r for r in lsq_rows + ukf["rows"]}
+    first_rows = [by_pair[(m, e)] for m in forms for e in ("lsq", "ukf")]
+    first = {"rows": first_rows, **choose(first_rows, forms), "idata": {**lsq_idata, **ukf["idata"]}}
     order = posterior_order(budget.forms, first["selected"], first["bayes_factors"])
     if budget.mcmc_pool_s is not None:
         say(f"emcee posteriors from a pool of {budget.mcmc_pool_s:g} s, in this order: {', '.join(order)}")
-    lsq_s = {r["model"]: float(r.get("wall_s") or 0.0) for r in first["rows"] if r["engine"] == "lsq"}
-    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, lsq_s=lsq_s, say=say)
+    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, fitted=fitted, say=say)
     fits = dict(first["idata"])
     fits.update({(m, "mcmc"): idata for m, (_, idata) in chains.items() if idata is not None})
     by_pair = {(r["model"], r["engine"]): r for r in first["rows"]}

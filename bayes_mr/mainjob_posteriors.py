@@ -23,7 +23,7 @@ import time as _time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from .comparison import compare, row_of
+from .fit_jobs import FIT_ERRORS, error_row, least_squares, lsq_mcmc_job
 from .identify import Emcee, LeastSquares
 from .inference.budget import over_budget
 
@@ -51,22 +51,56 @@ def posterior_order(forms, selected: str | None, bayes_factors: dict[str, float]
     return [m for _, m in sorted(enumerate(forms), key=key)]
 
 
-def pool_spent(pool_s: float, used: dict[str, float], lsq_s: float) -> str:
-    """Why a posterior was not started: what is left of the pool (after the forms that spent it, with their
-    seconds) does not cover the least-squares fit its chain starts from."""
-    left = max(pool_s - sum(used.values()), 0.0)
+def least_squares_pass(part_a, part_b, forms, *, seed: int, noise: str, say) -> tuple[list[dict], dict, dict]:
+    """Every form's least-squares fit on ``part_a``, validated on ``part_b``: the comparison's ``lsq`` rows, and the
+    fit each form's chain starts from (:func:`run_posteriors`), made once for both.
+
+    The fit is the one the chain would make (:meth:`~bayes_mr.identify.Emcee.lsq_settings` of ``seed``), so the
+    rows are those :func:`bayes_mr.comparison.compare` gives for ``lsq`` and the posteriors those it gives for
+    ``mcmc`` (:func:`bayes_mr.fit_jobs.lsq_mcmc_job`).
+
+    Returns
+    -------
+    rows : list of dict
+        One ``lsq`` row per form, in order (``error`` where the fit failed).
+    idata : dict
+        (form, ``"lsq"``) → InferenceData of the fits that succeeded.
+    fitted : dict
+        Form → (likelihood, :class:`~bayes_mr.inference.lsq.LSQResult`) of the fits that succeeded.
+    """
+    lsq = LeastSquares(settings=Emcee.lsq_settings(seed))
+    rows, idata, fitted = [], {}, {}
+    for i, form in enumerate(forms, 1):
+        say(f"{form} × lsq …")
+        t0 = _time.perf_counter()
+        try:
+            fitted[form] = least_squares(form, lsq, part_a, noise)
+        except FIT_ERRORS as exc:
+            rows.append(error_row(form, "lsq", exc, _time.perf_counter() - t0))
+            say(f"{form} × lsq: failed ({rows[-1]['error']}) [{i}/{len(forms)}]")
+            continue
+        [(row, data)] = lsq_mcmc_job(form, lsq, None, part_a, part_b, seed, False, noise, fitted=fitted[form])
+        rows.append(row)
+        if data is not None:
+            idata[(form, "lsq")] = data
+        say(f"{form} × lsq: ln Z {row.get('log_evidence')}, MSE {row.get('mse')}, {row['wall_s']:.1f} s "
+            f"[{i}/{len(forms)}]")
+    return rows, idata, fitted
+
+
+def pool_spent(pool_s: float, used: dict[str, float]) -> str:
+    """Why a posterior was not started: nothing is left of the pool (the forms that spent it, with their seconds)."""
     spent = "".join(f", {m} {s:.0f} s" for m, s in used.items())
-    return (f"the {left:.0f} s left of the posteriors' pool of {pool_s:g} s (spent: {spent[2:] or 'nothing yet'}) do "
-            f"not cover the least-squares fit its chain starts from ({lsq_s:.0f} s): not run")
+    return f"the posteriors' pool of {pool_s:g} s is spent ({spent[2:] or 'nothing yet'}): not run"
 
 
-def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: int, lsq_s: dict[str, float],
+def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: int, fitted: dict,
                    say) -> tuple[dict[str, tuple[dict, object]], dict[str, str]]:
     """Each form's emcee posterior in ``order``, sharing ``budget.mcmc_pool_s``.
 
-    Each runs as :func:`bayes_mr.comparison.compare` runs a model's ``lsq`` and ``mcmc`` rows (one least-squares
-    fit, the chain from its optimum: the same least squares as the comparison's ``lsq`` row, so its seconds
-    ``lsq_s[form]`` are held back from the chain's budget). Without a pool each posterior has
+    Each chain starts from the form's least-squares fit of the first pass (``fitted``, :func:`least_squares_pass`),
+    as :func:`bayes_mr.comparison.compare` runs a model's ``lsq`` and ``mcmc`` rows from one fit; a form without
+    one is fitted first (and fails as its ``lsq`` row did). Without a pool each posterior has
     ``budget.mcmc.max_seconds`` alone; with one, at most that and what the earlier posteriors left.
 
     Parameters
@@ -78,8 +112,8 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
     budget : Budget
         Uses ``mcmc``, ``mcmc_pool_s``, ``evidence`` and ``noise``.
     seed : int
-    lsq_s : dict
-        Form → seconds of its least-squares fit in the comparison.
+    fitted : dict
+        Form → (likelihood, LSQResult) on ``part_a`` (:func:`least_squares_pass`).
     say : callable
 
     Returns
@@ -94,23 +128,29 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
     cap = budget.mcmc.max_seconds
     fits, skipped, used = {}, {}, {}
     for form in order:
-        left = math.inf if pool is None else pool - sum(used.values()) - lsq_s.get(form, 0.0)
+        left = math.inf if pool is None else pool - sum(used.values())
         if left <= 0:
-            skipped[form] = pool_spent(pool, used, lsq_s.get(form, 0.0))
+            skipped[form] = pool_spent(pool, used)
             say(f"{form} × mcmc: {skipped[form]}")
             continue
         seconds = min(left, cap if cap is not None else math.inf)
         settings = replace(budget.mcmc, seed=seed, progress=False,
                            max_seconds=None if math.isinf(seconds) else seconds)
-        estimators = {"lsq": LeastSquares(), "mcmc": Emcee(settings=settings, evidence=budget.evidence)}
+        mcmc = Emcee(settings=settings, evidence=budget.evidence)
+        lsq = None if form in fitted else LeastSquares(settings=Emcee.lsq_settings(seed))
+        say(f"{form} × mcmc …")
         t0 = _time.perf_counter()
-        out = compare(part_a, [form], engines=("lsq", "mcmc"), validate=part_b, seed=seed, progress=say,
-                      estimators=estimators, noise=budget.noise)
+        row, idata = lsq_mcmc_job(form, lsq, mcmc, part_a, part_b, seed, False, budget.noise,
+                                  fitted=fitted.get(form))[-1]
         used[form] = _time.perf_counter() - t0
-        row = row_of(out["rows"], form, "mcmc") or next(r for r in out["rows"] if r["engine"] == "mcmc")
         why = over_budget(row.get("error"))
         if why:  # not a failure: a posterior the budget could not converge, not started (budget.py)
             skipped[form] = why
+            say(f"{form} × mcmc: {why}")
+        elif idata is None:
+            fits[form] = (row, None)
+            say(f"{form} × mcmc: failed ({row['error']})")
         else:
-            fits[form] = (row, out["idata"].get((form, "mcmc")))
+            fits[form] = (row, idata)
+            say(f"{form} × mcmc: ln Z {row.get('log_evidence')}, MSE {row.get('mse')}, {used[form]:.1f} s")
     return fits, skipped

@@ -1,4 +1,4 @@
-"""Compile the UKF's filter in a child process while the job's first fits run.
+"""Compile the UKF's filter in a child process while the job's first fits run; declare the posteriors' work.
 
 On an empty kernel cache (a fresh machine) the first least-squares fit
 compiles the generic simulator (~40 s of one core) and the first UKF fit the
@@ -12,6 +12,15 @@ for the child (:func:`wait`) before its first UKF fit, which then loads the
 filter from disk. On a warm cache the child only loads it (a few seconds). A
 child that fails changes nothing but the time: the job compiles the filter
 itself, as without it, and :func:`wait` returns the child's error.
+
+The job's posteriors each run a model's simulator for hundreds of millions of
+sample-steps, on the model's own kernel once it is compiled
+(:mod:`bayes_mr._specialise`). Counted as they run, that compile starts
+part-way through the posterior's pilot and runs beside it; :func:`expect_posteriors`
+declares the pilot's sample-steps up front, so on an empty cache a model whose
+pilot alone pays for its kernel starts compiling it at its first
+least-squares fit and its posterior has it from the start. On a warm cache
+it changes nothing.
 """
 
 from __future__ import annotations
@@ -83,3 +92,27 @@ def wait(child: Future, say, timeout: float = MAX_WAIT_S) -> str | None:
     elif waited >= 1.0:
         say(f"waited {waited:.0f} s for the UKF filter's compile (bayes_mr.warmup; an empty kernel cache)")
     return error
+
+
+def expect_posteriors(record: xr.Dataset, forms, settings) -> None:
+    """Declare the emcee pilots the job will run on ``record`` for each of ``forms``.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+        The record the posteriors fit (its kind and number of samples).
+    forms : sequence of str
+        Models whose posteriors the job runs.
+    settings : MCMCSettings
+        The chains' settings: each pilot runs ``walkers(d)`` walkers for :attr:`pilot_length` steps over every
+        sample, d the model's parameter count on this kind of test.
+    """
+    from ._specialise import expect_work
+    from .models import get_model
+    from .models.drivers import run_batch
+
+    kind, n = record.attrs["kind"], int(record.sizes["time"])
+    for form in forms:
+        model = get_model(form)
+        expect_work(run_batch, model.layout(kind), n * settings.walkers(len(model.param_names(kind)))
+                    * settings.pilot_length)

@@ -7,7 +7,7 @@ from records import offset_device_record
 
 from bayes_mr.inference.mcmc import MCMCSettings
 from bayes_mr.mainjob import FULL, QUICK, Budget
-from bayes_mr.mainjob_posteriors import posterior_order, run_posteriors
+from bayes_mr.mainjob_posteriors import least_squares_pass, posterior_order, run_posteriors
 from bayes_mr.warmup import compile_filter_aside, wait
 
 
@@ -19,28 +19,48 @@ def test_the_selected_form_runs_first_then_the_evidence_decides():
     assert posterior_order(["a", "b"], None, {}) == ["a", "b"]
 
 
-def test_a_spent_pool_starts_nothing_and_says_who_spent_it():
-    """A pool the first form's least squares already used up: that posterior is not run and the report says
-    the pool was spent; the next form's chain gets what is left (here too little to start: its measured step
-    cost is refused with the budget's numbers, after the least squares it shares with the comparison)."""
+def test_a_spent_pool_starts_nothing_and_says_who_spent_it(monkeypatch):
+    """A pool too small for the first form's chain: its measured step cost is refused with the budget's numbers,
+    and that refusal spends what was left, so the next form is not started and the report says who spent it.
+    Neither refits the least squares of the first pass (the chain starts from it)."""
     rec = offset_device_record(1.6, fs=250.0)
-    budget = replace(QUICK, forms=("dahl", "lugre"), mcmc_pool_s=0.05,
+    budget = replace(QUICK, forms=("dahl", "lugre"), mcmc_pool_s=1e-6,
                      mcmc=MCMCSettings(max_steps=300, min_tau_multiple=20.0, rhat_max=1.05))
-    fits, skipped = run_posteriors(rec, None, ["dahl", "lugre"], budget, seed=0, lsq_s={"dahl": 1.0},
-                                   say=lambda *_: None)
+    rows, idata, fitted = least_squares_pass(rec, None, ["dahl", "lugre"], seed=0, noise="iid", say=lambda *_: None)
+    assert [r["engine"] for r in rows] == ["lsq", "lsq"] and set(idata) == {("dahl", "lsq"), ("lugre", "lsq")}
+
+    def refit(*_):
+        raise AssertionError("the posterior refitted least squares")
+
+    monkeypatch.setattr("bayes_mr.fit_jobs.fit_lsq", refit)
+    fits, skipped = run_posteriors(rec, None, ["dahl", "lugre"], budget, seed=0, fitted=fitted, say=lambda *_: None)
     assert fits == {}
-    assert skipped["dahl"] == ("the 0 s left of the posteriors' pool of 0.05 s (spent: nothing yet) do not cover the "
-                               "least-squares fit its chain starts from (1 s): not run")
-    assert "more than the" in skipped["lugre"] and skipped["lugre"].endswith("not run")
+    assert "more than the" in skipped["dahl"] and skipped["dahl"].endswith("not run")
+    assert skipped["lugre"].startswith("the posteriors' pool of 1e-06 s is spent (dahl 0 s)"), skipped["lugre"]
 
 
-def test_without_a_pool_each_posterior_runs_on_its_own_settings():
+def test_the_first_pass_and_the_posterior_are_compare_s_rows():
+    """The first pass's ``lsq`` row and the posterior from its fit are the rows ``compare`` gives for ``lsq`` and
+    ``mcmc`` of the same form and seed (one least-squares fit for both there too), without a pool each posterior
+    on its own settings."""
+    from bayes_mr.comparison import compare
+    from bayes_mr.identify import Emcee, LeastSquares
+    from bayes_mr.inference.lsq import LSQSettings
+
     rec = offset_device_record(1.6, fs=250.0)
-    budget = replace(QUICK, forms=("dahl",), mcmc=MCMCSettings(max_steps=400, min_tau_multiple=20.0, rhat_max=1.05))
-    fits, skipped = run_posteriors(rec, rec, ["dahl"], budget, seed=0, lsq_s={}, say=lambda *_: None)
+    mcmc = MCMCSettings(max_steps=400, min_tau_multiple=20.0, rhat_max=1.05)
+    budget = replace(QUICK, forms=("dahl",), mcmc=mcmc)
+    rows, _, fitted = least_squares_pass(rec, rec, ["dahl"], seed=3, noise="iid", say=lambda *_: None)
+    fits, skipped = run_posteriors(rec, rec, ["dahl"], budget, seed=3, fitted=fitted, say=lambda *_: None)
     assert skipped == {}
     row, idata = fits["dahl"]
     assert row["engine"] == "mcmc" and "error" not in row and idata is not None and "validation" in row
+    est = {"mcmc": Emcee(settings=replace(mcmc, seed=3, progress=False), evidence=budget.evidence),
+           "lsq": LeastSquares(settings=LSQSettings(seed=3))}
+    ref = compare(rec, ["dahl"], engines=("lsq", "mcmc"), validate=rec, seed=3, progress=False, estimators=est)
+    for mine, theirs in ((rows[0], ref["rows"][0]), (row, ref["rows"][1])):
+        assert mine["params"] == theirs["params"] and mine["log_evidence"] == theirs["log_evidence"], (mine, theirs)
+        assert mine["validation"]["mse"] == theirs["validation"]["mse"]
 
 
 def test_the_budget_refuses_what_it_cannot_run():

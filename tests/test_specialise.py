@@ -16,9 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray as xr
 from records import device_inputs, structure_inputs
 
 from bayes_mr import _specialise as S
+from bayes_mr.inference.mcmc import MCMCSettings
 from bayes_mr.models import get_model
 from bayes_mr.models.drivers import run_batch, run_one
 from bayes_mr.simulate import Inputs
@@ -127,6 +129,34 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
     lay = tuple(int(v) for v in args[0])
     assert started[1:] == [(lay, started[1][1], None, S.BACKGROUND_NICE), (lay, started[1][1], S.QUICK_INLINE, 0)]
     assert len(started) == 3
+
+
+def test_declared_work_starts_the_compiles_at_the_first_call(monkeypatch, cache):
+    """Work declared ahead (:func:`~bayes_mr._specialise.expect_work`, the main job's posteriors) counts as work
+    asked: the next call for that layout, however small, starts the layout's compiles; another layout's does not."""
+    from bayes_mr.models.kernel import mass
+    from bayes_mr.warmup import expect_posteriors
+
+    monkeypatch.setenv(S.KERNELS_ENV, "auto")
+    monkeypatch.setattr(S, "_work", {})
+    started = []
+    monkeypatch.setattr(S, "_start_background",
+                        lambda d, l, t, inline=None, nice=0: started.append((l, inline, nice)))
+    args, other = _mass_args("lugre", "device"), _mass_args("dahl", "device")
+    S.expect_work(mass, args[0], S.AUTO_WORK)
+    assert S.kernel(mass, other[0], work=1.0)(*other) == mass(*other) and started == []
+    assert S.kernel(mass, args[0], work=1.0)(*args) == mass(*args)
+    lay = tuple(int(v) for v in args[0])
+    assert started == [(lay, None, S.BACKGROUND_NICE), (lay, S.QUICK_INLINE, 0)]
+    # the main job declares each form's pilot: samples x walkers x pilot steps, on the simulator's layout
+    settings = MCMCSettings()
+    rec = xr.Dataset(coords={"time": np.arange(1000) * 1e-3}, attrs={"kind": "device"})
+    monkeypatch.setattr(S, "_work", {})
+    expect_posteriors(rec, ["spencer"], settings)
+    model = get_model("spencer")
+    d = len(model.param_names("device"))
+    assert S._work == {(id(run_batch), S._lay_tuple(model.layout("device"))):
+                       1000.0 * settings.walkers(d) * settings.pilot_length}
 
 
 def _mass_args(name: str, kind: str) -> tuple:
