@@ -131,6 +131,26 @@ def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow(monkeypatc
         assert abs(chi2_z(res, mu, P)) < 3.0
 
 
+def test_rounds_that_stall_below_the_floor_have_not_settled(monkeypatch):
+    """The rounds of the target above, made to go on past ``ADAPT_ACCEPT``, stall at ~0.5 (a gain under
+    ``ADAPT_GAIN``): above ``ADAPT_FLOOR`` that ends the adaptation and the chain proposes from q alone on 8
+    walkers. With the floor raised above where they stall the same stall is a poor q, not a settled one: every
+    round runs, and the chain keeps the rounds' mixture on 2·d + 2 walkers — and is still exact."""
+    from bayes_mr.inference import mcmc
+
+    monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
+    mu, C, P, log_prob = correlated_gaussian(12, seed=7)
+    settings = MCMCSettings(seed=0, progress=False, adapt_rounds=4)
+    stalled = sample(log_prob, mu, C / 400, settings)
+    assert len(stalled.adapt_acceptance) < 4 and stalled.n_walkers == 8, stalled.adapt_acceptance
+    assert mcmc.ADAPT_FLOOR < stalled.adapt_acceptance[-1] < mcmc.ADAPT_GAIN * stalled.adapt_acceptance[-2]
+    monkeypatch.setattr(mcmc, "ADAPT_FLOOR", 0.9)
+    poor = sample(log_prob, mu, C / 400, settings)
+    assert len(poor.adapt_acceptance) == 4 and poor.n_walkers == 2 * 12 + 2, poor.adapt_acceptance
+    assert poor.converged and np.all(np.abs((poor.mean() - mu) / poor.mcse()) < 3.3)
+    assert abs(chi2_z(poor, mu, P)) < 3.0
+
+
 def test_emcee_3_1_6_snooker_is_biased_and_ours_is_not():
     """emcee 3.1.6's DESnookerMove under-disperses (dfm/emcee#531); the package's corrected move does not.
 
