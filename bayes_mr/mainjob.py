@@ -172,7 +172,8 @@ QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),
 def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
     """Every form × engine on A, validated on B: least squares of every form, then the UKF of every form (its
     filter compiled meanwhile in a child process, :mod:`bayes_mr.warmup`), then the emcee posteriors from one
-    pool of seconds, the selected form's first (:mod:`bayes_mr.mainjob_posteriors`)."""
+    pool of seconds, the selected form's first, each chain from its form's least-squares fit of the first pass
+    (:mod:`bayes_mr.mainjob_posteriors`)."""
     forms = [get_model(m).name for m in budget.forms]  # as compare names its rows
     child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus)
     expect_posteriors(part_a, forms, budget.mcmc)
