@@ -87,7 +87,8 @@ def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset
     as it did when each made its own. A failure is a row with ``error``, as in :func:`fit_job`.
 
     ``fitted``: that fit already made on ``record`` (:func:`least_squares`; the main job's first pass), not made
-    again — its seconds (``LSQResult.wall_s``) count as above. ``mcmc`` None: the ``lsq`` row alone.
+    again — its seconds (``LSQResult.wall_s``) count as above. An estimator given as None makes no row: ``mcmc``
+    None gives the ``lsq`` row alone, ``lsq`` None (with ``fitted``) the ``mcmc`` row alone.
     """
     t0 = _time.perf_counter()
     if fitted is None:

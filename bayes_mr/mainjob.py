@@ -154,7 +154,8 @@ class Budget:
 #: took 401 s (spencer 216 s) and the whole ``make run`` 13.9 min against 17.6. The pool's 720 s leave a margin
 #: for a slower machine (unbudgeted on part A the five took ~625 s in separate processes). With 2·d + 2 walkers
 #: and differential evolution in the chain (stop 50) spencer took 436 s and bouc-wen (~4100 steps of 14, ~7 min) did not fit in
-#: 600 s; with 180 s per posterior (until stop 48) spencer never started.
+#: 600 s; with 180 s per posterior (until stop 48) spencer never started. A fresh clone's first run at stop 53 (empty
+#: kernel cache, each chain from the first pass's fit): 542 s of the pool (spencer 279 s, bouc-wen 153 s), 17.3 min.
 #: Selection is by the Laplace evidence every form has; a thermodynamic-integration ladder per form (several
 #: minutes each on this record) does not fit — ``bayes-mr compare --engines mcmc`` runs it. The virtual shake
 #: table runs the UKF only (its least squares took 165 s of the stage's 232 s; the README reports the UKF).
