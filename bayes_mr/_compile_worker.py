@@ -5,7 +5,9 @@ Started by :func:`bayes_mr._specialise._start_background` with the generated
 module's path, the kernel's name, a file holding the argument types (pickled,
 hex), the marker to write when numba has saved the machine code (the parent
 runs a slower kernel until that marker exists) and, optionally, how many
-steps to lower its own CPU priority (``nice``) before compiling.
+steps to lower its own CPU priority (``nice``) before compiling. The parent
+claims the compile first (:func:`claim`), so that processes sharing a cache
+start one child per kernel, not one each.
 """
 
 from __future__ import annotations
@@ -14,8 +16,10 @@ import hashlib
 import importlib.util
 import os
 import pickle
+import socket
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numba
@@ -66,15 +70,82 @@ def mark_ready(marker: Path, name: str, argtypes: tuple) -> None:
     _write_atomic(marker, f"{name} {argtypes!r}\n")
 
 
+#: A claim older than this [s] is taken over whoever made it (a compile at the lowest priority on a busy machine
+#: has taken 13 min; a claimant on another host, or one whose process id was reused, cannot be checked otherwise).
+CLAIM_STALE_S = 3600.0
+
+
+def claim_path(marker: Path) -> Path:
+    """The file a process holds while a child compiles the kernel of ``marker`` (:func:`claim`)."""
+    return marker.with_suffix(".claim")
+
+
+def _alive(text: str) -> bool:
+    """Whether the claim ``text`` ("host pid time") names a process that may still be compiling."""
+    try:
+        host, pid, since = text.split()
+        pid, since = int(pid), float(since)
+    except ValueError:
+        return False  # a claim being written or a damaged one: taken over
+    if time.time() - since > CLAIM_STALE_S:
+        return False
+    if host != socket.gethostname():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def claim(marker: Path, pid: int | None = None) -> bool:
+    """Claim the compile of ``marker``'s kernel for process ``pid`` (default this one) across processes.
+
+    False when another live process holds the claim (it is compiling that kernel: on a cluster sharing one cache,
+    or in pytest's or Dask's workers, one compile instead of one per process). A claim whose process has ended
+    without removing it (killed) or that is older than :data:`CLAIM_STALE_S` is taken over. The compiling child
+    removes the claim when it is done, whether it succeeded or not (:func:`main`).
+    """
+    path = claim_path(marker)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = f"{socket.gethostname()} {os.getpid() if pid is None else pid} {time.time()!r}\n"
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                held = path.read_text()
+            except FileNotFoundError:
+                continue  # released meanwhile: try again
+            if _alive(held):
+                return False
+            path.unlink(missing_ok=True)  # stale: take it over
+            continue
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        return True
+    return False
+
+
+def hand_over(marker: Path, pid: int) -> None:
+    """Name the compiling child ``pid`` in the claim this process made for it (its liveness is what counts)."""
+    _write_atomic(claim_path(marker), f"{socket.gethostname()} {pid} {time.time()!r}\n")
+
+
 def main(argv: list[str]) -> int:
     """Compile ``argv`` = [module path, kernel name, types file, marker, (nice)]; 0 on success."""
     path, name, types_file, marker = argv[:4]
     if len(argv) > 4 and int(argv[4]) > 0:
         os.nice(int(argv[4]))  # compile on the cores the parent leaves idle
-    argtypes = pickle.loads(bytes.fromhex(Path(types_file).read_text()))
-    fn = getattr(_load(Path(path)), name)
-    fn.compile(argtypes)  # a cached dispatcher saves the overload to numba's cache here
-    mark_ready(Path(marker), name, argtypes)
+    try:
+        argtypes = pickle.loads(bytes.fromhex(Path(types_file).read_text()))
+        fn = getattr(_load(Path(path)), name)
+        fn.compile(argtypes)  # a cached dispatcher saves the overload to numba's cache here
+        mark_ready(Path(marker), name, argtypes)
+    finally:
+        claim_path(Path(marker)).unlink(missing_ok=True)
     return 0
 
 

@@ -159,6 +159,44 @@ def test_declared_work_starts_the_compiles_at_the_first_call(monkeypatch, cache)
                        1000.0 * settings.walkers(d) * settings.pilot_length}
 
 
+def test_processes_sharing_a_cache_start_one_compile_per_kernel(monkeypatch, cache):
+    """The first process to ask claims a kernel's compile; another process (here: the per-process memory cleared)
+    starts no second child while the claim's child lives, and takes over a claim whose process has ended (killed
+    before it released it) or that is older than ``CLAIM_STALE_S``. The child releases the claim when done."""
+    from bayes_mr import _compile_worker as W
+    from bayes_mr.models.kernel import mass
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    spawned = []
+
+    class Child:
+        def __init__(self, argv, **_):
+            spawned.append(argv)
+            self.pid = os.getpid()  # a live process
+
+    monkeypatch.setattr(S.subprocess, "Popen", Child)
+    args = _mass_args("dahl", "device")
+    types = tuple(S.typeof(a, S.Purpose.argument) for a in args)
+    lay = S._lay_tuple(args[0])
+    S._start_background(mass, lay, types, inline=S.QUICK_INLINE)
+    marker = Path(spawned[0][-2])
+    assert W.claim_path(marker).read_text().split()[1] == str(os.getpid())
+    monkeypatch.setattr(S, "_started", set())  # another process
+    S._start_background(mass, lay, types, inline=S.QUICK_INLINE)
+    assert len(spawned) == 1
+    W.hand_over(marker, int(ended.stdout))  # the child was killed without releasing its claim
+    monkeypatch.setattr(S, "_started", set())
+    S._start_background(mass, lay, types, inline=S.QUICK_INLINE)
+    assert len(spawned) == 2
+    assert not W.claim(marker)  # held by the new (live) child
+    monkeypatch.setattr(W, "CLAIM_STALE_S", 0.0)
+    assert W.claim(marker)  # too old: taken over
+    # the child releases the claim when it is done, compiled or not (here: its module is missing)
+    with pytest.raises(FileNotFoundError):
+        W.main([str(marker.parent / "missing.py"), "mass", str(marker.with_suffix(".types")), str(marker)])
+    assert not W.claim_path(marker).exists()
+
+
 def _mass_args(name: str, kind: str) -> tuple:
     """Arguments of the (small, quick to compile) kernel :func:`~bayes_mr.models.kernel.mass`."""
     model = get_model(name)
