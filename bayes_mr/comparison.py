@@ -36,9 +36,8 @@ import xarray as xr
 from . import results
 from .executor import Outcome, run_jobs, share
 from .inference.estimators import engine
-from .fit_jobs import unit_job, unit_results
+from .fit_jobs import row_message, unit_job, unit_results
 from .fit_jobs import units as fit_units
-from .inference.budget import over_budget
 from .inference.evidence_scale import LaplaceTerms, at_common_scale
 from .models import get_model
 from .progress import say as progress_say
@@ -298,15 +297,9 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
         m, ests = units[o.index]
         for e, row, idata in unit_results(o, m, [e for e, _ in ests]):
             n_done[0] += 1
-            if idata is None:
-                why = over_budget(row["error"])
-                say(f"{m} × {e}: " + (why if why else f"failed ({row['error']})") +  # why ends "not run"
-                    f" [{n_done[0]}/{len(pairs)}]")
-                continue
-            if out_dir is not None:
+            if idata is not None and out_dir is not None:
                 results.save(idata, Path(out_dir) / f"{m.replace('+', '_')}__{e}.nc")
-            say(f"{m} × {e}: ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s "
-                f"[{n_done[0]}/{len(pairs)}]")
+            say(f"{row_message(m, e, row)} [{n_done[0]}/{len(pairs)}]")
 
     if executor is not None:
         say(f"{len(pairs)} fits on {type(executor).__name__} …")

@@ -16,6 +16,7 @@ from . import results
 from .executor import Outcome
 from .identify import Identify
 from .identify import validate as validate_fit
+from .inference.budget import over_budget
 from .inference.estimators import Emcee, LeastSquares, engine
 from .inference.lsq import LSQResult, fit_lsq
 from .likelihood import OutputError
@@ -38,6 +39,16 @@ def _why(exc: Exception) -> str:
 def error_row(model: str, engine_name: str, exc: Exception, wall_s: float) -> dict:
     """The row of a fit that raised ``exc`` after ``wall_s`` seconds (as every job of the grid makes it)."""
     return _failed(model, engine_name, _why(exc), wall_s)[0]
+
+
+def row_message(model: str, engine_name: str, row: dict) -> str:
+    """What a finished row says in the progress: its evidence, MSE and seconds; why a budget did not run it
+    (:func:`~bayes_mr.inference.budget.over_budget`); or why it failed."""
+    head = f"{model} × {engine_name}: "
+    if "error" in row:
+        why = over_budget(row["error"])
+        return head + (why if why else f"failed ({row['error']})")  # why ends "not run"
+    return head + f"ln Z {row['log_evidence']}, MSE {row['mse']}, {row['wall_s']:.1f} s"
 
 
 def _row(idata, validate: xr.Dataset | None) -> tuple[dict, object]:

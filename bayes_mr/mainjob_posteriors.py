@@ -23,7 +23,7 @@ import time as _time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from .fit_jobs import FIT_ERRORS, error_row, least_squares, lsq_mcmc_job
+from .fit_jobs import FIT_ERRORS, error_row, least_squares, lsq_mcmc_job, row_message
 from .identify import Emcee, LeastSquares
 from .inference.budget import over_budget
 
@@ -76,15 +76,13 @@ def least_squares_pass(part_a, part_b, forms, *, seed: int, noise: str, say) -> 
         try:
             fitted[form] = least_squares(form, lsq, part_a, noise)
         except FIT_ERRORS as exc:
-            rows.append(error_row(form, "lsq", exc, _time.perf_counter() - t0))
-            say(f"{form} × lsq: failed ({rows[-1]['error']}) [{i}/{len(forms)}]")
-            continue
-        [(row, data)] = lsq_mcmc_job(form, lsq, None, part_a, part_b, seed, False, noise, fitted=fitted[form])
+            row, data = error_row(form, "lsq", exc, _time.perf_counter() - t0), None
+        else:
+            [(row, data)] = lsq_mcmc_job(form, lsq, None, part_a, part_b, seed, False, noise, fitted=fitted[form])
         rows.append(row)
         if data is not None:
             idata[(form, "lsq")] = data
-        say(f"{form} × lsq: ln Z {row.get('log_evidence')}, MSE {row.get('mse')}, {row['wall_s']:.1f} s "
-            f"[{i}/{len(forms)}]")
+        say(f"{row_message(form, 'lsq', row)} [{i}/{len(forms)}]")
     return rows, idata, fitted
 
 
@@ -143,14 +141,10 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
         row, idata = lsq_mcmc_job(form, lsq, mcmc, part_a, part_b, seed, False, budget.noise,
                                   fitted=fitted.get(form))[-1]
         used[form] = _time.perf_counter() - t0
+        say(row_message(form, "mcmc", row))
         why = over_budget(row.get("error"))
         if why:  # not a failure: a posterior the budget could not converge, not started (budget.py)
             skipped[form] = why
-            say(f"{form} × mcmc: {why}")
-        elif idata is None:
-            fits[form] = (row, None)
-            say(f"{form} × mcmc: failed ({row['error']})")
         else:
             fits[form] = (row, idata)
-            say(f"{form} × mcmc: ln Z {row.get('log_evidence')}, MSE {row.get('mse')}, {used[form]:.1f} s")
     return fits, skipped

@@ -32,6 +32,10 @@ from concurrent.futures import TimeoutError as FutureTimeout
 
 import xarray as xr
 
+from ._specialise import expect_work
+from .models import get_model
+from .models.drivers import run_batch
+
 #: Samples of the record the child fits (enough for every step of a UKF fit; a fraction of a second of work).
 SLICE = 400
 #: Longest wait for the child [s]; past it the job goes on and compiles the filter itself if it must.
@@ -107,10 +111,6 @@ def expect_posteriors(record: xr.Dataset, forms, settings) -> None:
         The chains' settings: each pilot runs ``walkers(d)`` walkers for :attr:`pilot_length` steps over every
         sample, d the model's parameter count on this kind of test.
     """
-    from ._specialise import expect_work
-    from .models import get_model
-    from .models.drivers import run_batch
-
     kind, n = record.attrs["kind"], int(record.sizes["time"])
     for form in forms:
         model = get_model(form)
