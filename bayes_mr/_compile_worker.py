@@ -134,11 +134,26 @@ def hand_over(marker: Path, pid: int) -> None:
     _write_atomic(claim_path(marker), f"{socket.gethostname()} {pid} {time.time()!r}\n")
 
 
+def idle_class() -> bool:
+    """Move this process to the idle scheduling class (Linux ``SCHED_IDLE``), where it has one; whether it did.
+
+    Below every ``nice`` level: a thread of the job (or of its stages beside the posteriors, at ``nice`` 19,
+    :mod:`bayes_mr.mainjob_aside`) that wakes takes the core at once, so a compile for a later run never delays a
+    parallel batch of this one.
+    """
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        return False
+    return True
+
+
 def main(argv: list[str]) -> int:
     """Compile ``argv`` = [module path, kernel name, types file, marker, (nice)]; 0 on success."""
     path, name, types_file, marker = argv[:4]
     if len(argv) > 4 and int(argv[4]) > 0:
         os.nice(int(argv[4]))  # compile on the cores the parent leaves idle
+        idle_class()
     try:
         argtypes = pickle.loads(bytes.fromhex(Path(types_file).read_text()))
         fn = getattr(_load(Path(path)), name)

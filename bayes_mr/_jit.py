@@ -31,7 +31,7 @@ from pathlib import Path
 import numba
 from numba import njit
 
-from ._threads import limit_blas
+from ._threads import limit_blas, passive_wait
 
 #: Text that marks a source file as compiling code (its edits change the cache key).
 _MARKERS = (b"@hot", b"@driver", b"njit(")
@@ -59,6 +59,7 @@ def _configure_cache() -> None:
 
 
 _configure_cache()
+passive_wait()  # numba's OpenMP threads sleep between batches instead of spinning (bayes_mr._threads)
 limit_blas()  # numba's threads do the parallel work; BLAS's own pool would compete with them (bayes_mr._threads)
 
 

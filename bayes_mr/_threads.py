@@ -17,6 +17,17 @@ simulates) limits every BLAS library loaded in the process to one thread
 when it is imported, through threadpoolctl. ``$BAYES_MR_BLAS_THREADS`` sets
 another number (e.g. for a notebook that also does large dense algebra);
 ``0`` leaves BLAS alone.
+
+numba's own pool (the GNU OpenMP layer here) has the same habit: after each
+parallel batch its threads spin, waiting for the next, and between batches
+the job runs Python (emcee's bookkeeping, least squares' trust-region
+steps) for most of its time. Measured on the 2-core machine: a loop of
+short batches with Python between them held 2.0 cores where its work
+needed 1.23; in ``make run`` the job's process held both cores for 15
+minutes, and a kernel compiling beside it at low priority got none.
+:func:`passive_wait` sets ``OMP_WAIT_POLICY=PASSIVE`` (sleeping threads)
+unless the environment says otherwise — before numba starts its pool,
+which reads it once.
 """
 
 from __future__ import annotations
@@ -42,6 +53,21 @@ def blas_threads() -> int:
         raise ValueError(f"${ENV}={raw!r}: expected a non-negative integer (threads per BLAS library; "
                          "0 leaves BLAS's own setting alone)")
     return int(raw)
+
+
+#: The OpenMP variable :func:`passive_wait` sets, and its value.
+OMP_WAIT = ("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def passive_wait() -> None:
+    """Let numba's OpenMP threads sleep between parallel batches (``OMP_WAIT_POLICY=PASSIVE``), unless
+    ``$OMP_WAIT_POLICY`` is set already.
+
+    It takes effect only if numba's thread pool has not started in this
+    process (the OpenMP runtime reads the variable when it loads); spawned
+    child processes inherit it.
+    """
+    os.environ.setdefault(*OMP_WAIT)
 
 
 def limit_blas() -> None:

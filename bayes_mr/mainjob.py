@@ -25,6 +25,11 @@ command voltage, measured force):
    identifies the best of the thesis's four forms (by the same evidence) from
    displacement and acceleration only, and the damper force it implies is
    compared with the measured force.
+   Steps 4 and 5 and the least squares under the other residual model need
+   only the first pass (every form's least squares and UKF): they run in a
+   child process at the lowest priority beside the posteriors, on the cycles
+   those leave (:mod:`bayes_mr.mainjob_aside`; :attr:`Budget.aside`, the same
+   numbers as in process).
 6. **A second record** of the same damper (``run --validate DATA2``), when
    given: prepared as part B was (:mod:`bayes_mr.mainjob_records`), held
    out whole, predicted by every fit and by the diagnosis's baseline and
@@ -46,21 +51,21 @@ from pathlib import Path
 import xarray as xr
 
 from . import results
-from .comparison import choose, compare, row_of, simulating_point, table
-from .data.virtual_table import THESIS_FRAME, implied_damper_force, virtual_shake_table
-from .identify import UKF, Identify, LeastSquares, predict
+from .comparison import choose, compare, table
+from .identify import UKF
+from .mainjob_aside import Stage, run_stages, start
 from .mainjob_context import noise_sensitivity, published_spencer
 from .mainjob_posteriors import least_squares_pass, posterior_order, run_posteriors
-from .mainjob_records import diagnosis_dir, prepare, prepare_other, second_record
+from .mainjob_records import prepare, prepare_other, second_record
+from .mainjob_stages import THESIS_FORMS, best_thesis_form, diagnose_selected, shake_table
 from .warmup import compile_filter_aside, expect_posteriors, wait
-from .inference.lsq import LSQSettings
 from .inference.mcmc import MCMCSettings
 from .inference.ukf import TAUS
-from .scores import force_nrmse
 from .models import FORMS, get_model
 from .progress import say as progress_say
 from .report.run import report_markdown, run_figures, spencer_table
-from .scores import score
+
+__all__ = ["FULL", "QUICK", "THESIS_FORMS", "Budget", "diagnose_selected", "prepare", "run", "shake_table"]
 
 @dataclass(frozen=True)
 class Budget:
@@ -112,6 +117,9 @@ class Budget:
         (:mod:`bayes_mr.diagnosis.terms`; a term is kept only if the evidence and the error on a held-out
         end of A both improve, and again with the start of A held out), whatever the verdict: on the measured
         damper the named effects leave ~80× the noise floor, and that is what the diagnosis must speak to.
+    aside : bool
+        Run the stages that need only the first pass (noise sensitivity, diagnosis, virtual shake table) in a
+        child process beside the posteriors (:mod:`bayes_mr.mainjob_aside`; same results), else after them here.
     """
 
     fs: float
@@ -129,6 +137,7 @@ class Budget:
     input_interp: str | None = "linear"
     shake_table_engines: tuple[str, ...] = ("ukf", "lsq")
     terms: bool = True
+    aside: bool = True
 
     def __post_init__(self):
         unknown = set(self.shake_table_engines) - {"ukf", "lsq"}
@@ -167,14 +176,19 @@ FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcm
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),
                mcmc=MCMCSettings(max_steps=500, min_tau_multiple=20.0, rhat_max=1.05),
-               evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1))
+               evidence="laplace", ukf_lhs=1, ukf_taus=(0.01, 0.1), aside=False)
 
 
-def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
-    """Every form × engine on A, validated on B: least squares of every form, then the UKF of every form (its
-    filter compiled meanwhile in a child process, :mod:`bayes_mr.warmup`), then the emcee posteriors from one
-    pool of seconds, the selected form's first, each chain from its form's least-squares fit of the first pass
-    (:mod:`bayes_mr.mainjob_posteriors`)."""
+def first_pass(part_a, part_b, budget: Budget, *, seed: int, say) -> dict:
+    """Least squares of every form, then the UKF of every form (its filter compiled meanwhile in a child process,
+    :mod:`bayes_mr.warmup`), on A and validated on B; the selection on them (:func:`~bayes_mr.comparison.choose`).
+
+    Returns
+    -------
+    dict
+        ``rows``, ``idata`` ((form, engine) → InferenceData), ``fitted`` (form → the least-squares fit each chain
+        starts from, :func:`~bayes_mr.mainjob_posteriors.least_squares_pass`) and the selection's keys.
+    """
     forms = [get_model(m).name for m in budget.forms]  # as compare names its rows
     child = compile_filter_aside(part_a, forms[0], budget.ukf_lhs, budget.ukf_taus)
     expect_posteriors(part_a, forms, budget.mcmc)
@@ -183,12 +197,18 @@ def compare_forms(part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, s
     ukf = compare(part_a, forms, engines=("ukf",), validate=part_b, seed=seed, progress=say,
                   estimators={"ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)}, noise=budget.noise)
     by_pair = {(r["model"], r["engine"]): r for r in lsq_rows + ukf["rows"]}
-    first_rows = [by_pair[(m, e)] for m in forms for e in ("lsq", "ukf")]
-    first = {"rows": first_rows, **choose(first_rows, forms), "idata": {**lsq_idata, **ukf["idata"]}}
+    rows = [by_pair[(m, e)] for m in forms for e in ("lsq", "ukf")]
+    return {"rows": rows, **choose(rows, forms), "idata": {**lsq_idata, **ukf["idata"]}, "fitted": fitted}
+
+
+def with_posteriors(first: dict, part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
+    """The comparison: the first pass (:func:`first_pass`) and the emcee posteriors from one pool of seconds, the
+    selected form's first, each chain from its form's least-squares fit of the first pass
+    (:mod:`bayes_mr.mainjob_posteriors`); every fit saved under ``out_dir/fits``; the selection on all rows."""
     order = posterior_order(budget.forms, first["selected"], first["bayes_factors"])
     if budget.mcmc_pool_s is not None:
         say(f"emcee posteriors from a pool of {budget.mcmc_pool_s:g} s, in this order: {', '.join(order)}")
-    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, fitted=fitted, say=say)
+    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, fitted=first["fitted"], say=say)
     fits = dict(first["idata"])
     fits.update({(m, "mcmc"): idata for m, (_, idata) in chains.items() if idata is not None})
     by_pair = {(r["model"], r["engine"]): r for r in first["rows"]}
@@ -207,105 +227,70 @@ SELECTION_KEYS = ("evidence_engine", "selected_by", "selected_on", "unconverged"
                   "log_evidence_calibrated", "bayes_factors_calibrated", "selected_calibrated")
 
 
-#: The forms the thesis identified on its shake table (Spencer's model is a device model with 14 parameters).
-THESIS_FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
-
-
-def _best_thesis_form(comp: dict) -> str | None:
-    """The thesis form with the highest evidence on the selection route (for the virtual shake table)."""
-    ln_z = {r["model"]: float(r["log_evidence"]) for r in comp["rows"]
-            if r["engine"] == comp["evidence_engine"] and "error" not in r and r["model"] in THESIS_FORMS}
-    return max(ln_z, key=ln_z.get) if ln_z else None
-
-
 def _best_by_validation(rows: list[dict]) -> dict | None:
     ok = [r for r in rows if r.get("validation", {}).get("force_nrmse") is not None]
     return min(ok, key=lambda r: r["validation"]["force_nrmse"]) if ok else None
 
 
-def shake_table(part_a, part_b, model: str, budget: Budget, *, seed: int = 0, out_dir: Path, say) -> dict:
-    """The thesis's UKF on a virtual shake table built from the measured damper (A to train, B to check).
+def _posteriors_beside(first: dict, todo: list[Stage], part_a, part_b, budget: Budget, *, seed: int, out_dir: Path,
+                       say, clock: tuple[float, float], live: bool, timing: dict) -> tuple[dict, dict, str]:
+    """The posteriors (:func:`with_posteriors`) with the stages ``todo`` beside them in a child process
+    (:mod:`bayes_mr.mainjob_aside`; after them here without :attr:`Budget.aside`).
 
-    The identified model's ``c`` and ``k`` hold the frame's and the damper's
-    linear terms together, so the damper force it implies is its restoring
-    force less the known frame's (:func:`~bayes_mr.data.virtual_table.implied_damper_force`);
-    ``force_nrmse_a``/``_b`` score that against the measured force. The
-    hysteretic part alone (the structure model's ``force`` output) is scored
-    beside it as ``hysteretic_nrmse_a``/``_b``.
-    """
-    vst = {"a": virtual_shake_table(part_a), "b": virtual_shake_table(part_b)}
-    out = {"frame": dict(THESIS_FRAME), "model": model}
-    # least squares from its two best convex-screened starts: on the 13-s part A the normalized Bouc–Wen
-    # fit takes ~120 s so (~190 s from four, to the same optimum, measured); the UKF is the thesis's method
-    estimators = {"ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus),
-                  "lsq": LeastSquares(LSQSettings(n_starts=2))}
-    for label in budget.shake_table_engines:
-        est = estimators[label]
-        say(f"virtual shake table: {model} × {label} (displacement and acceleration only)")
-        try:
-            idata = Identify(model, est).fit(vst["a"], seed=seed, progress=False)
-        except (RuntimeError, ValueError) as exc:
-            out[label] = {"error": str(exc)}
-            continue
-        results.save(idata, out_dir / "fits" / f"shake_table__{model.replace('+', '_')}__{label}.nc")
-        summ = results.summary_of(idata)
-        theta = results.point_of(idata)
-        entry = {"params": summ.params, "mse": summ.mse, "trained": summ.trained, "diverged": summ.diverged,
-                 "wall_s": summ.wall_s}
-        for part, rec in vst.items():
-            try:
-                pred = predict(model, rec, theta)
-            except ValueError as exc:
-                entry[f"error_{part}"] = str(exc)
-                continue
-            s = score(rec, pred)  # its force NRMSE is that of the model's force output, the hysteretic part
-            implied = implied_damper_force(rec, pred)
-            entry[f"force_nrmse_{part}"] = force_nrmse(rec["force"].values, implied, rec["valid"].values.astype(bool))
-            entry[f"hysteretic_nrmse_{part}"] = s["force_nrmse"]
-            entry[f"mse_{part}"] = s["mse"]
-            entry[f"_force_{part}"] = implied
-        out[label] = entry
-    out["_vst_b"] = vst["b"]
-    return out
-
-
-def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, rows: list[dict],
-                      seed: int, out_dir: Path, say) -> dict[str, dict]:
-    """Diagnose the selected model on part A at :attr:`Budget.diagnose_fs`, its extension validated on B.
-
-    The record is prepared again at the diagnosis's rate (same trim and split
-    as the comparison's, :func:`prepare`); the model is refitted there from
-    its least-squares optimum of the comparison (:func:`bayes_mr.diagnosis.extend.fit_at`,
-    no search from scratch), and :func:`~bayes_mr.diagnosis.diagnose` ranks
-    the MR-damper effects (:data:`~bayes_mr.diagnosis.extend.CANDIDATES`) once against it and adds the passing
-    ones best first (``search="ranked"``). The report, figures, ``baseline.nc``
-    and ``extended.nc`` go to ``out_dir/diagnose_MODEL``; the extended model,
-    as fitted on A, predicts part B at the same rate (``validation``).
+    ``clock`` is (the comparison's start by :func:`time.perf_counter`, the job's by :func:`time.time`); ``timing``
+    gets ``compare`` (first pass and posteriors) and ``beside_wait`` (the wait for the child after them).
 
     Returns
     -------
-    dict
-        ``{model: diagnose JSON}`` (``{"error": …}`` when it failed), plus the
-        private ``_part_b`` (part B at the diagnosis's rate) for the figures.
+    comp : dict
+    done : dict
+        Stage name → (value, wall seconds).
+    where : str
+        Where the stages ran.
     """
-    from .diagnosis import Search, diagnose
-    from .diagnosis.extend import CANDIDATES
-
-    row = row_of(rows, model, "lsq")
-    if row is None:
-        return {model: {"error": f"{model} has no least-squares fit to start the diagnosis from"}}
-    _, a_hi, b_hi, _ = prepare(replace(budget, fs=budget.diagnose_fs or budget.fs), record)
-    window = a_hi if budget.diagnose_s is None else a_hi.isel(
-        time=slice(0, int(budget.diagnose_s * float(a_hi.attrs["fs"]))))
-    say(f"diagnosing {model} on {window.sizes['time'] / float(a_hi.attrs['fs']):.1f} s of part A at "
-        f"{float(a_hi.attrs['fs']):.0f} Hz (from its least-squares optimum)")
+    aside = start(todo, t0=clock[1], live=live) if budget.aside else None
     try:
-        out = diagnose(window, model, start=simulating_point(row),
-                       search=Search("ranked", candidates=CANDIDATES, max_effects=5), validate=b_hi, seed=seed,
-                       terms=budget.terms, progress=say, noise=budget.noise, out_dir=diagnosis_dir(out_dir, model))
-    except (RuntimeError, ValueError) as exc:
-        out = {"error": str(exc)}
-    return {model: out, "_part_b": b_hi}
+        comp = with_posteriors(first, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
+    except BaseException:
+        if aside is not None:
+            aside.cancel()
+        raise
+    timing["compare"] = _time.perf_counter() - clock[0]
+    say(f"selected by {comp.get('selected_by') or comp['evidence_route']}: {comp['selected']}")
+    if aside is None:
+        return comp, run_stages(todo, say), "this process, after the posteriors"
+    done, timing["beside_wait"], where = aside.collect(say)
+    return comp, done, where
+
+
+def _context_stages(first: dict, record, part_a, part_b, budget: Budget, stages, *, seed: int,
+                    out_dir: Path) -> list[Stage]:
+    """The stages that need only the first pass (:mod:`bayes_mr.mainjob_aside`): the model choice under the other
+    residual model, the diagnosis of the form the first pass selects and the virtual shake table of the best
+    thesis form (as ``stages`` and the budget ask)."""
+    todo = [Stage("noise_sensitivity", noise_sensitivity, (part_a, budget.forms, budget.noise, first["rows"]),
+                  {"seed": seed})]
+    if "diagnose" in stages and budget.diagnose_s != 0 and first["selected"] is not None:
+        todo.append(Stage("diagnose", diagnose_selected, (record, first["selected"], budget),
+                          {"rows": first["rows"], "seed": seed, "out_dir": out_dir}))
+    thesis_form = best_thesis_form(first)
+    if "shake_table" in stages and thesis_form is not None:
+        todo.append(Stage("shake_table", shake_table, (part_a, part_b, thesis_form, budget),
+                          {"seed": seed, "out_dir": out_dir}))
+    return todo
+
+
+def _redone(done: dict, name: str, wanted: bool, choice: tuple, timing: dict, tell, fn, *args, **kwargs):
+    """Stage ``name``'s value (None when it does not run). ``choice`` is (planned, now): the form it was started
+    for (the first pass's choice) and the one the comparison ends with; when the posteriors changed it, the stage
+    runs again here for ``now`` (``tell``: the job's progress)."""
+    planned, now = choice
+    if not wanted or now is None:
+        return None
+    if planned == now:
+        return done[name][0]
+    tell(f"{name}: started for {planned} (the first pass's choice), the comparison chose {now}: run again")
+    return _timed(timing, name, fn, *args, **kwargs)
 
 
 def _strip(d):
@@ -416,32 +401,32 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     other = None if validate is None else prepare_other(budget, validate, part_a)
     timing["prepare"] = _time.perf_counter() - t0
 
-    comp = _timed(timing, "compare", compare_forms, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
+    t = _time.perf_counter()
+    first = first_pass(part_a, part_b, budget, seed=seed, say=say)
+    todo = _context_stages(first, record, part_a, part_b, budget, stages, seed=seed, out_dir=out_dir)
+    comp, done, where = _posteriors_beside(first, todo, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say,
+                                           clock=(t, _time.time() - (_time.perf_counter() - t0)),
+                                           live=progress is True, timing=timing)
     selected = comp["selected"]
-    say(f"selected by {comp.get('selected_by') or comp['evidence_route']}: {selected}")
-    sensitivity = _timed(timing, "noise_sensitivity", noise_sensitivity, part_a, budget.forms, budget.noise,
-                         comp["rows"], seed=seed, say=say)
+    timing.update({name: wall for name, (_, wall) in done.items()})
     tab, spencer, params = _tables(comp, part_a, part_b, out_dir)
-    thesis_form = _best_thesis_form(comp)
-    diag: dict[str, dict] = {}
-    if "diagnose" in stages and budget.diagnose_s != 0 and selected is not None:
-        diag = _timed(timing, "diagnose", diagnose_selected, record, selected, budget, rows=comp["rows"],
-                      seed=seed, out_dir=out_dir, say=say)
-    second = None
-    if other is not None:
-        second = _timed(timing, "second_record", second_record, validate, other, comp, diag, budget, like=part_a,
-                        out_dir=out_dir, say=say)
-    vst = None
-    if "shake_table" in stages and thesis_form is not None:
-        vst = _timed(timing, "shake_table", shake_table, part_a, part_b, thesis_form, budget, seed=seed,
-                     out_dir=out_dir, say=say)
+    sensitivity = done["noise_sensitivity"][0]
+    diag = _redone(done, "diagnose", "diagnose" in stages and budget.diagnose_s != 0, (first["selected"], selected),
+                   timing, say, diagnose_selected, record, selected, budget, rows=comp["rows"], seed=seed,
+                   out_dir=out_dir, say=say) or {}
+    second = None if other is None else _timed(timing, "second_record", second_record, validate, other, comp, diag,
+                                               budget, like=part_a, out_dir=out_dir, say=say)
+    thesis_form = best_thesis_form(comp)
+    vst = _redone(done, "shake_table", "shake_table" in stages, (best_thesis_form(first), thesis_form), timing, say,
+                  shake_table, part_a, part_b, thesis_form, budget, seed=seed, out_dir=out_dir, say=say)
 
     best = _best_by_validation(comp["rows"])
     figs = run_figures(out_dir, part_b, comp["rows"], selected, best, spencer, vst, diag)
     summary = {
         **_comparison_summary(comp, budget, info, sensitivity, best),
         "spencer_1997": spencer, "diagnose": diag, "second_record": second, "shake_table": vst, "figures": figs,
-        "stages_s": timing, "seed": seed, "full_job": full_job,
+        "stages_s": timing, "stages_where": {"beside_posteriors": list(done), "ran_in": where},
+        "seed": seed, "full_job": full_job,
     }
     summary["wall_s"] = _time.perf_counter() - t0
     return _write(_strip(summary), out_dir, tab, params, say)

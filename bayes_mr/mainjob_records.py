@@ -225,7 +225,7 @@ def second_record(raw: xr.Dataset, prepared: tuple[xr.Dataset, dict], comp: dict
     prepared : (xarray.Dataset, dict)
         :func:`prepare_other` at the comparison's rate.
     comp, diag : dict
-        :func:`bayes_mr.mainjob.compare_forms` and :func:`bayes_mr.mainjob.diagnose_selected`.
+        :func:`bayes_mr.mainjob.with_posteriors` and :func:`bayes_mr.mainjob_stages.diagnose_selected`.
     budget : bayes_mr.mainjob.Budget
     like : xarray.Dataset
         Part A of the main record.

@@ -318,3 +318,12 @@ def test_specialised_choice_compiles_here_and_marks_it_ready_for_auto(monkeypatc
     monkeypatch.setattr(S, "_start_background", lambda *a: pytest.fail("no compile needed: it is ready"))
     monkeypatch.setattr(S, "specialised", lambda d, l, inline=None: (lambda *a: "specialised ran"))
     assert S.kernel(mass, args[0], work=2 * S.AUTO_WORK)(*args) == "specialised ran"
+
+
+def test_a_background_compile_runs_in_the_idle_class_where_the_os_has_one():
+    probe = ("import os\nfrom bayes_mr._compile_worker import idle_class\n"
+             "moved = idle_class()\nprint(moved, moved == (os.sched_getscheduler(0) == os.SCHED_IDLE))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
+    assert out[1] == "True"
+    if hasattr(os, "SCHED_IDLE"):
+        assert out[0] == "True"

@@ -46,3 +46,17 @@ def test_a_bad_override_names_the_variable_and_what_to_give(monkeypatch):
     assert blas_threads() == 3
     monkeypatch.delenv(ENV)
     assert blas_threads() == 1
+
+
+def _omp_wait_after_import(value: str | None) -> str:
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    if value is not None:
+        env["OMP_WAIT_POLICY"] = value
+    probe = "import os, bayes_mr.simulate\nprint(os.environ.get('OMP_WAIT_POLICY'))"
+    return subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
+def test_numba_threads_sleep_between_batches_unless_the_environment_says_otherwise():
+    assert _omp_wait_after_import(None) == "PASSIVE"
+    assert _omp_wait_after_import("ACTIVE") == "ACTIVE"

@@ -39,9 +39,9 @@ def run_figures(out_dir: Path, part_b: xr.Dataset, rows: list[dict], selected: s
     spencer : dict
         :func:`bayes_mr.mainjob_context.published_spencer` (``params`` [SI]).
     vst : dict or None
-        :func:`bayes_mr.mainjob.shake_table` with its private arrays (``_vst_b``, ``_force_b``).
+        :func:`bayes_mr.mainjob_stages.shake_table` with its private arrays (``_vst_b``, ``_force_b``).
     diag : dict, optional
-        :func:`bayes_mr.mainjob.diagnose_selected` (``{model: diagnose JSON, "_part_b": part B at its rate}``).
+        :func:`bayes_mr.mainjob_stages.diagnose_selected` (``{model: diagnose JSON, "_part_b": part B at its rate}``).
         When the diagnosis ran, the part-B figures are drawn at its rate with the model with the terms found
         beyond the vocabulary first (when it kept any), the extended model (the package's best model of named
         physics, fitted on A), then the selected model as refitted there; with a second
