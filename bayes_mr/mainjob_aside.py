@@ -4,19 +4,21 @@ After the first pass (every form's least squares and UKF,
 :func:`bayes_mr.mainjob.first_pass`) the selected form is known, and three
 stages need nothing more: the model choice under the other residual model,
 the diagnosis of the selected form and the virtual shake table
-(:mod:`bayes_mr.mainjob_context`, :mod:`bayes_mr.mainjob_stages`). The
-posteriors that follow are most of the job, and they leave part of a 2-core
-machine idle: between its compiled batches over a few walkers the chain is
-Python on one core (emcee's bookkeeping, the convergence checks). Measured
-in ``make run`` with numba's threads sleeping between batches
-(:func:`bayes_mr._threads.passive_wait`): the job's process held 1.42 of the 2
-cores over its posteriors.
-
-:func:`start` runs the stages, in order, in a spawned child at the lowest
-CPU priority (``nice`` :data:`NICE`, one numba thread): it takes the cycles the
-posteriors leave and yields a core the moment one of the job's threads wakes,
-so the posteriors' budget of wall seconds is not spent on it.
+(:mod:`bayes_mr.mainjob_context`, :mod:`bayes_mr.mainjob_stages`).
+:func:`start` runs them, in order, in a spawned child at the lowest CPU
+priority (``nice`` :data:`NICE`, one numba thread): it takes only cycles the
+job's own threads leave, and yields a core the moment one of them wakes, so
+the posteriors' budget of wall seconds is not spent on it.
 :meth:`Aside.collect` waits for the stages after the posteriors.
+
+It is off in ``make run`` (:attr:`bayes_mr.mainjob.Budget.aside`), measured:
+on the 2-core machine the posteriors leave almost nothing. A fresh clone's
+``make run`` with it on kept its posteriors' time (460 s against 454 s) but
+the child's least squares of normalized-bouc-wen under the AR residual took
+165 s against 6 s in process (about 4 % of a core), so its stages ran after
+the posteriors on one thread (diagnosis 318 s against 189-212 s on two) and
+the job took 978 s against 848-875 s. It is for a machine whose cores the
+job's threads do not fill.
 
 Nothing depends on which process ran a stage: each is deterministic in its
 arguments (seeded; a compiled batch computes its members independently of

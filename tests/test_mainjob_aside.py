@@ -74,10 +74,11 @@ def _without_times(d):
 
 def test_the_main_job_beside_the_posteriors_gives_the_in_process_numbers(tmp_path):
     budget = replace(QUICK, forms=("dahl", "lugre"), duration_s=3.0)
+    assert not budget.aside  # off in make run (module docstring)
     here = run(tmp_path / "here", budget=budget, progress=False)
     beside = run(tmp_path / "beside", budget=replace(budget, aside=True), progress=False)
     assert here["stages_where"]["ran_in"] == "this process, after the posteriors"
     assert beside["stages_where"]["ran_in"] == "a child process beside the posteriors"
-    assert beside["stages_where"]["beside_posteriors"] == ["noise_sensitivity", "diagnose", "shake_table"]
+    assert beside["stages_where"]["stages"] == ["noise_sensitivity", "diagnose", "shake_table"]
     for key in ("noise_sensitivity", "diagnose", "shake_table"):
         assert _without_times(beside[key]) == _without_times(here[key]), key

@@ -259,4 +259,9 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
         out += ["", "![shake table](shake_table_force.png)", ""]
     out += ["## Time", "", ", ".join(f"{k} {v:.0f} s" for k, v in summary["stages_s"].items())
             + f"; total {summary['wall_s']:.0f} s.", ""]
+    where = summary.get("stages_where")
+    if where and where["stages"]:
+        wait = " (`beside_wait`: what the job waited for them after its posteriors)" \
+            if "beside_wait" in summary["stages_s"] else ""
+        out += [f"{', '.join(where['stages'])} ran in {where['ran_in']}{wait}; `bayes_mr/mainjob_aside.py`.", ""]
     return "\n".join(out)
