@@ -36,7 +36,7 @@ import xarray as xr
 from . import results
 from .executor import Outcome, run_jobs, share
 from .inference.estimators import engine
-from .fit_jobs import row_message, unit_job, unit_results
+from .fit_jobs import free_parameters, row_message, unit_job, unit_results
 from .fit_jobs import units as fit_units
 from .inference.evidence_scale import LaplaceTerms, at_common_scale
 from .models import get_model
@@ -303,7 +303,9 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
 
     if executor is not None:
         say(f"{len(pairs)} fits on {type(executor).__name__} …")
-    outcomes = run_jobs(unit_job, jobs, executor=executor, on_start=started, on_done=finished)
+    # on an executor the models with the most parameters first (their fits are the long ones)
+    outcomes = run_jobs(unit_job, jobs, executor=executor, on_start=started, on_done=finished,
+                        cost=[free_parameters(m, record) for m, _ in units])
     done = {(m, e): (row, idata) for (m, ests), o in zip(units, outcomes)
             for e, row, idata in unit_results(o, m, [e for e, _ in ests])}
     rows = [done[p][0] for p in pairs]

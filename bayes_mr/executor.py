@@ -33,6 +33,15 @@ On an executor each job runs with one numba thread: the executor's workers are
 the parallelism, and the compiled kernels would otherwise start one thread per
 core in every worker. Thread counts do not change any result (every batched
 kernel computes its members independently).
+
+In one process, :func:`local_threads` is a pool of threads, one per numba
+thread, for grids whose jobs are least-squares fits (diagnose's candidate
+effects, the starts of a search): a fit's simulations release the GIL, and a
+fit alone leaves a core idle through its Python steps and its one-member
+simulations (measured on the bench's diagnose, 30 s at 1 kHz: 18.5 s in
+turn, 13.4 s on two threads with the costliest candidates first, the same
+result). ``cost`` (:func:`run_jobs`) submits the costliest jobs first, so the
+last to finish is not a long one started late.
 """
 
 from __future__ import annotations
@@ -153,6 +162,7 @@ def run_jobs(
     executor=None,
     on_start: Callable[[int], None] | None = None,
     on_done: Callable[[Outcome], None] | None = None,
+    cost: Sequence[float] | None = None,
 ) -> list[Outcome]:
     """Call ``fn(*args)`` for every ``args`` of ``jobs``, in process or on ``executor``.
 
@@ -171,6 +181,9 @@ def run_jobs(
         submitted (executor).
     on_done : callable, optional
         Called with each :class:`Outcome` as its job finishes.
+    cost : sequence of float, optional
+        Expected relative cost of each job: on an executor the costliest are submitted first (ties in the
+        order given); the outcomes keep the order of ``jobs``. In process the jobs run in the order given.
 
     Returns
     -------
@@ -191,18 +204,21 @@ def run_jobs(
             done(o)
             outcomes.append(o)
         return outcomes
-    return _run_on(executor, fn, jobs, start, done)
+    order = list(range(len(jobs))) if cost is None else sorted(range(len(jobs)), key=lambda i: -float(cost[i]))
+    return _run_on(executor, fn, jobs, start, done, order)
 
 
-def _run_on(executor, fn: Callable, jobs: Sequence[tuple], start, done) -> list[Outcome]:
-    """:func:`run_jobs` on an executor: submit all, collect as they finish, cancel the rest on Ctrl-C."""
+def _run_on(executor, fn: Callable, jobs: Sequence[tuple], start, done, order: list[int]) -> list[Outcome]:
+    """:func:`run_jobs` on an executor: submit all (in ``order``), collect as they finish, cancel the rest on
+    Ctrl-C."""
     t0 = _time.perf_counter()
     futures: list = []
+    index: dict = {}
     try:
-        for i, args in enumerate(jobs):
-            futures.append(submit(executor, call_single_threaded, fn, *args))
+        for i in order:
+            futures.append(submit(executor, call_single_threaded, fn, *jobs[i]))
+            index[_ident(futures[-1])] = i
             start(i)
-        index = {_ident(f): i for i, f in enumerate(futures)}
         outcomes: dict[int, Outcome] = {}
         for fut in _completed(executor, futures):
             i = index[_ident(fut)]
@@ -216,6 +232,36 @@ def _run_on(executor, fn: Callable, jobs: Sequence[tuple], start, done) -> list[
         cancel(futures)
         raise
     return [outcomes[i] for i in range(len(futures))]
+
+
+#: numba threading layers that run parallel kernels called from several threads at once (``workqueue`` aborts).
+THREADSAFE_LAYERS = ("omp", "tbb")
+
+
+@contextlib.contextmanager
+def local_threads(given=None) -> Iterator[object]:
+    """``given`` if not None, else a pool of threads in this process, one per numba thread, closed after.
+
+    None (jobs in turn) where that would not run jobs side by side: one numba thread here (a job on an
+    executor, or a one-core machine), or a threading layer not known to take concurrent calls (``workqueue``).
+    Each job runs its kernels on one thread (:func:`call_single_threaded`); results are those of the jobs in
+    turn. On Ctrl-C the jobs not started are cancelled and the running ones (a fit each) finish first.
+    """
+    if given is not None:
+        yield given
+        return
+    import numba
+    from concurrent.futures import ThreadPoolExecutor
+
+    n = numba.get_num_threads()  # starts numba's threading layer, so the next line can name it
+    if n < 2 or numba.threading_layer() not in THREADSAFE_LAYERS:
+        yield None
+        return
+    pool = ThreadPoolExecutor(n, thread_name_prefix="bayes_mr")
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 @contextlib.contextmanager

@@ -80,6 +80,12 @@ def shares_lsq(lsq, mcmc, seed: int) -> bool:
             and lsq.settings == mcmc.lsq_settings(seed))
 
 
+def free_parameters(model: str, record: xr.Dataset) -> int:
+    """Parameters of ``model`` on ``record``'s kind of test: a fit's cost grows with them (the ``cost`` by which a
+    grid on an executor starts its longest jobs first, :func:`bayes_mr.executor.run_jobs`)."""
+    return len(get_model(model).param_names(record.attrs["kind"]))
+
+
 def least_squares(model: str, lsq, record: xr.Dataset, noise: str = "iid") -> tuple[OutputError, LSQResult]:
     """The likelihood of ``model`` on ``record`` and its least-squares fit: what a model's ``lsq`` row and its
     chain share (:func:`lsq_mcmc_job`). Raises what the fit raises (:data:`FIT_ERRORS`)."""

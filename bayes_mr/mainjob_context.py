@@ -11,6 +11,7 @@ from __future__ import annotations
 import xarray as xr
 
 from .comparison import calibrated_evidence, compare, row_of
+from .executor import local_threads
 from .identify import predict
 from .models import get_model
 from .scores import score
@@ -54,10 +55,10 @@ def noise_sensitivity(part_a: xr.Dataset, forms: tuple[str, ...], noise: str, ro
         ``evidence_scale`` (:func:`bayes_mr.comparison.calibrated_evidence`).
     """
     other = "ar" if noise == "iid" else "iid"
-    alt_rows = []
-    for form in forms:
-        say(f"{form}: least squares under the {other} residual model")
-        alt_rows += compare(part_a, [form], engines=["lsq"], seed=seed, progress=say, noise=other)["rows"]
+    say(f"{', '.join(forms)}: least squares under the {other} residual model")
+    with local_threads() as pool:  # side by side on this process's threads (the same fits, executor.py)
+        alt_rows = compare(part_a, list(forms), engines=["lsq"], seed=seed, progress=say, noise=other,
+                           executor=pool)["rows"]
     out = {}
     for name, rs in ((noise, rows), (other, alt_rows)):
         out[name] = _laplace_choice(rs)

@@ -23,7 +23,8 @@ import time as _time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from .fit_jobs import FIT_ERRORS, error_row, least_squares, lsq_mcmc_job, row_message
+from .executor import Outcome, local_threads, run_jobs
+from .fit_jobs import FIT_ERRORS, error_row, free_parameters, least_squares, lsq_mcmc_job, row_message
 from .identify import Emcee, LeastSquares
 from .inference.budget import over_budget
 
@@ -69,21 +70,39 @@ def least_squares_pass(part_a, part_b, forms, *, seed: int, noise: str, say) -> 
         Form → (likelihood, :class:`~bayes_mr.inference.lsq.LSQResult`) of the fits that succeeded.
     """
     lsq = LeastSquares(settings=Emcee.lsq_settings(seed))
-    rows, idata, fitted = [], {}, {}
-    for i, form in enumerate(forms, 1):
-        say(f"{form} × lsq …")
-        t0 = _time.perf_counter()
-        try:
-            fitted[form] = least_squares(form, lsq, part_a, noise)
-        except FIT_ERRORS as exc:
-            row, data = error_row(form, "lsq", exc, _time.perf_counter() - t0), None
-        else:
-            [(row, data)] = lsq_mcmc_job(form, lsq, None, part_a, part_b, seed, False, noise, fitted=fitted[form])
-        rows.append(row)
+    rows, idata, fitted, n_done = [None] * len(forms), {}, {}, [0]
+
+    def finished(o: Outcome) -> None:
+        form = forms[o.index]
+        fit, row, data = o.value if o.ok else (None, error_row(form, "lsq", RuntimeError(o.error), o.wall_s), None)
+        rows[o.index] = row
+        if fit is not None:
+            fitted[form] = fit
         if data is not None:
             idata[(form, "lsq")] = data
-        say(f"{row_message(form, 'lsq', row)} [{i}/{len(forms)}]")
+        n_done[0] += 1
+        say(f"{row_message(form, 'lsq', row)} [{n_done[0]}/{len(forms)}]")
+
+    # the forms side by side on this process's threads, the costliest first (same fits as in turn, executor.py)
+    with local_threads() as pool:
+        if pool is not None:
+            say(f"{', '.join(forms)} × lsq, side by side …")
+        run_jobs(form_least_squares, [(form, lsq, part_a, part_b, seed, noise) for form in forms], executor=pool,
+                 on_start=lambda i: None if pool is not None else say(f"{forms[i]} × lsq …"), on_done=finished,
+                 cost=[free_parameters(form, part_a) for form in forms])
     return rows, idata, fitted
+
+
+def form_least_squares(form: str, lsq, part_a, part_b, seed: int, noise: str) -> tuple[tuple | None, dict, object]:
+    """One form's least-squares fit on ``part_a`` and its ``lsq`` row validated on ``part_b`` (a job of
+    :func:`least_squares_pass`): (fit or None, row, InferenceData or None); a fit that fails is a row with its error."""
+    t0 = _time.perf_counter()
+    try:
+        fit = least_squares(form, lsq, part_a, noise)
+    except FIT_ERRORS as exc:
+        return None, error_row(form, "lsq", exc, _time.perf_counter() - t0), None
+    [(row, data)] = lsq_mcmc_job(form, lsq, None, part_a, part_b, seed, False, noise, fitted=fit)
+    return fit, row, data
 
 
 def pool_spent(pool_s: float, used: dict[str, float]) -> str:

@@ -17,7 +17,7 @@ import pytest
 from bayes_mr.cli import main
 from bayes_mr.comparison import compare
 from bayes_mr.diagnosis import diagnose
-from bayes_mr.executor import open_executor, run_jobs
+from bayes_mr.executor import call_single_threaded, local_threads, open_executor, run_jobs
 from bayes_mr.results import _jsonable
 from records import offset_device_record
 
@@ -127,6 +127,70 @@ def test_diagnose_candidates_on_a_dask_cluster_give_the_same_cause_and_scores(re
     assert a["extended"] == b["extended"]
 
 
+def _spy_threads(monkeypatch, module, name: str) -> set:
+    """Replace ``module.name`` by a wrapper that records the threads it runs on; returns their names."""
+    seen, fn = set(), getattr(module, name)
+
+    def spied(*args, **kwargs):
+        seen.add(threading.current_thread().name)
+        return fn(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, spied)
+    return seen
+
+
+def test_diagnose_on_this_process_threads_gives_the_result_in_turn(record, monkeypatch):
+    """By default the candidates are fitted on threads of this process (one per numba thread), with the
+    same cause, scores and extended model as one after another (one numba thread: no pool)."""
+    import numba
+
+    from bayes_mr.diagnosis import screen
+
+    seen = _spy_threads(monkeypatch, screen, "screen_job")
+    a = diagnose(record, "dahl", progress=False)
+    on_threads = {n for n in seen if n.startswith("bayes_mr")}
+    seen.clear()
+    b = call_single_threaded(lambda: diagnose(record, "dahl", progress=False))
+    assert not any(n.startswith("bayes_mr") for n in seen)
+    if numba.get_num_threads() >= 2 and numba.threading_layer() in ("omp", "tbb"):
+        assert on_threads
+    assert a["cause"] == b["cause"] == "force_offset"
+    assert a["causes"] == b["causes"] and a["selection"] == b["selection"] and a["extended"] == b["extended"]
+
+
+def test_least_squares_starts_side_by_side_give_the_fit_in_turn(record, monkeypatch):
+    import bayes_mr.inference.lsq as lsq
+    from bayes_mr.likelihood import OutputError
+
+    seen = _spy_threads(monkeypatch, lsq, "refine")
+    lik = OutputError("dahl", record)
+    a = lsq.fit_lsq(lik, lsq.LSQSettings(n_starts=3, head_samples=400))
+    b = call_single_threaded(lsq.fit_lsq, lik, lsq.LSQSettings(n_starts=3, head_samples=400))
+    assert len(a.starts) == len(b.starts) == 3
+    assert [r["cost"] for r in a.starts] == [r["cost"] for r in b.starts]
+    assert a.log_evidence == b.log_evidence and list(a.phi) == list(b.phi)
+    assert seen  # the refinements ran (on the pool's threads where there is one)
+
+
+def test_local_threads_is_a_pool_only_where_jobs_can_run_side_by_side():
+    import numba
+
+    given = object()
+    with local_threads(given) as ex:
+        assert ex is given
+    with local_threads() as ex:
+        side_by_side = numba.get_num_threads() >= 2 and numba.threading_layer() in ("omp", "tbb")
+        assert (ex is not None) == side_by_side
+        if ex is not None:
+            assert ex.submit(threading.current_thread).result().name.startswith("bayes_mr")
+
+    def inside():
+        with local_threads() as inner:
+            return inner
+
+    assert call_single_threaded(inside) is None  # a job on an executor runs its own grids in turn
+
+
 # --- the runner itself -------------------------------------------------------------------
 
 def _sleep_then(value, seconds):
@@ -146,6 +210,18 @@ def test_results_keep_the_order_of_the_jobs_not_of_completion():
     assert order == [1, 2, 0]  # reported as they finished
     same = run_jobs(_sleep_then, [(1, 0.0), (-2, 0.0), (3, 0.0)])
     assert [(o.value, o.error) for o in same] == [(o.value, o.error) for o in out]
+
+
+def test_the_costliest_jobs_are_submitted_first_and_results_keep_the_order_of_the_jobs():
+    submitted = []
+    with ThreadPoolExecutor(1) as ex:
+        out = run_jobs(_sleep_then, [(1, 0.0), (2, 0.0), (3, 0.0), (4, 0.0)], executor=ex,
+                       on_start=submitted.append, cost=[1, 3, 2, 3])
+    assert submitted == [1, 3, 2, 0]  # ties in the order given
+    assert [o.value for o in out] == [1, 2, 3, 4] and [o.index for o in out] == [0, 1, 2, 3]
+    turn = []
+    run_jobs(_sleep_then, [(1, 0.0), (2, 0.0)], on_start=turn.append, cost=[1, 3])
+    assert turn == [0, 1]  # in process: in the order given
 
 
 def test_ctrl_c_cancels_the_jobs_that_have_not_started():

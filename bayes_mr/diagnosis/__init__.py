@@ -125,7 +125,7 @@ def diagnose(
     noise : {"iid", "ar"}
         Residual model of the fits (extensions keep the baseline's AR orders).
     executor : object, optional
-        Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`); same result.
+        Fits the candidate effects as parallel jobs (:mod:`bayes_mr.executor`; default this process's threads).
     terms : bool, optional
         Search the term library: always, never, or (None) where the model stays above its floor (:func:`_asked`).
     search : Search or {"forward", "ranked"}

@@ -409,7 +409,10 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
         say(f"{base.name} + {effect.name}{'(' + c.channel + ')' if c.channel else ''}: score {c.score:.3g} "
             f"({n_done[0]}/{len(effects)})")
 
-    outcomes = run_jobs(screen_job, [(rec, fitted, e, seed) for e in effects], executor=executor, on_done=finished)
+    # the costliest first on an executor (an effect's fit costs about as its parameters: shear_thinning's three
+    # were a quarter of the bench's diagnose, and when submitted last they ended the round alone)
+    outcomes = run_jobs(screen_job, [(rec, fitted, e, seed) for e in effects], executor=executor, on_done=finished,
+                        cost=[len(e.params) for e in effects])
     out = [_candidate(e, o) for e, o in zip(effects, outcomes)]
     return sorted(out, key=lambda c: -c.score if math.isfinite(c.score) else math.inf)
 

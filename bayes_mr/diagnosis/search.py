@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import xarray as xr
 
+from ..executor import local_threads
 from ..models import EFFECTS
 from .fits import Fit, global_refit
 from .screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
@@ -50,13 +51,16 @@ class Search:
 
     def run(self, record: xr.Dataset, base: Fit, *, seed: int = 0, progress=None,
             executor=None) -> tuple[list[Candidate], list[list[Candidate]]]:
-        """Effects added to ``base`` (in order) and the rounds of scores (the first against ``base``)."""
-        if self.route == "forward":
-            return forward_select(record, base, threshold=self.threshold, max_effects=self.max_effects, seed=seed,
-                                  progress=progress, executor=executor, candidates=self.candidates)
-        selected, ranking, _ = ranked_select(record, base, candidates=self.candidates, threshold=self.threshold,
-                                             max_effects=self.max_effects, seed=seed, progress=progress,
-                                             executor=executor)
+        """Effects added to ``base`` (in order) and the rounds of scores (the first against ``base``); the candidates
+        of a round are fitted on ``executor``, by default side by side on this process's threads
+        (:func:`~bayes_mr.executor.local_threads`: the same result)."""
+        with local_threads(executor) as ex:
+            if self.route == "forward":
+                return forward_select(record, base, threshold=self.threshold, max_effects=self.max_effects,
+                                      seed=seed, progress=progress, executor=ex, candidates=self.candidates)
+            selected, ranking, _ = ranked_select(record, base, candidates=self.candidates, threshold=self.threshold,
+                                                 max_effects=self.max_effects, seed=seed, progress=progress,
+                                                 executor=ex)
         return selected, [ranking]
 
 

@@ -103,7 +103,7 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
     return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every)
 
 
-@driver(parallel=True)
+@driver(parallel=True, nogil=True)  # nogil: fits side by side on threads (executor.local_threads)
 def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed, every=1):
     """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
 
