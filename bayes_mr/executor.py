@@ -264,6 +264,19 @@ def local_threads(given=None) -> Iterator[object]:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def side_by_side(fn: Callable, jobs: Sequence[tuple]) -> list:
+    """``[fn(*args) for args in jobs]``, the calls side by side on :func:`local_threads` where there can be.
+
+    For the few independent refinements of one fit (a search's starts): results in the order of ``jobs``; a call
+    that raises raises here (the first in that order), after the others have finished.
+    """
+    with local_threads() as pool:
+        if pool is None:
+            return [fn(*args) for args in jobs]
+        futures = [pool.submit(call_single_threaded, fn, *args) for args in jobs]
+        return [f.result() for f in futures]
+
+
 @contextlib.contextmanager
 def job_executor(given=None) -> Iterator[object]:
     """The executor a job's own sub-jobs should use: ``given``, else its Dask cluster, else None.

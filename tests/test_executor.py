@@ -17,7 +17,7 @@ import pytest
 from bayes_mr.cli import main
 from bayes_mr.comparison import compare
 from bayes_mr.diagnosis import diagnose
-from bayes_mr.executor import call_single_threaded, local_threads, open_executor, run_jobs
+from bayes_mr.executor import call_single_threaded, local_threads, open_executor, run_jobs, side_by_side
 from bayes_mr.results import _jsonable
 from records import offset_device_record
 
@@ -189,6 +189,14 @@ def test_local_threads_is_a_pool_only_where_jobs_can_run_side_by_side():
             return inner
 
     assert call_single_threaded(inside) is None  # a job on an executor runs its own grids in turn
+
+
+def test_side_by_side_keeps_the_order_of_the_calls_and_raises_what_one_raised():
+    assert side_by_side(_sleep_then, [(1, 0.2), (2, 0.0), (3, 0.1)]) == [1, 2, 3]
+    with pytest.raises(ValueError, match="negative -2"):
+        side_by_side(_sleep_then, [(1, 0.0), (-2, 0.0)])
+    names = side_by_side(lambda: threading.current_thread().name, [(), ()])
+    assert all(n.startswith("bayes_mr") for n in names) or names == [threading.current_thread().name] * 2
 
 
 # --- the runner itself -------------------------------------------------------------------

@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import noise_model
-from ..executor import call_single_threaded, local_threads
+from ..executor import side_by_side
 from ..likelihood import OutputError
 from . import calibrate, evidence_scale
 from .calibrate import hac_covariance
@@ -251,20 +251,16 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
     runs = [{"start": i + 1, "phi0": phi0, "phi": phi0, "cost": np.inf, "nfev": 0, "status": 0, "message": ""}
             for i, phi0 in enumerate(starts)]
     alive, budget = list(runs), max_nfev
-    with local_threads() as pool:  # the starts side by side (independent refinements: the same numbers)
-        while alive:
-            jobs = [(lik, run["phi"], lik.noise_sd.copy(), budget, cap) for run in alive]
-            done = ([pool.submit(call_single_threaded, refine, *job) for job in jobs] if pool is not None
-                    else [refine(*job) for job in jobs])
-            for run, res in zip(alive, done):
-                res = res if pool is None else res.result()  # a start that raised raises here, as in turn
-                run.update(phi=res.x, cost=float(res.cost), nfev=run["nfev"] + int(res.nfev),
-                           status=int(res.status), message=str(res.message))
-                say(f"start {run['start']}/{len(runs)}: cost {res.cost:.4g} after {run['nfev']} evaluations")
-            if not race or len(alive) == 1:
-                break
-            alive = sorted(alive, key=lambda r: r["cost"])[: (len(alive) + 1) // 2]
-            budget *= 2
+    while alive:  # the starts side by side (independent refinements: the same numbers as in turn)
+        done = side_by_side(refine, [(lik, run["phi"], lik.noise_sd.copy(), budget, cap) for run in alive])
+        for run, res in zip(alive, done):
+            run.update(phi=res.x, cost=float(res.cost), nfev=run["nfev"] + int(res.nfev), status=int(res.status),
+                       message=str(res.message))
+            say(f"start {run['start']}/{len(runs)}: cost {res.cost:.4g} after {run['nfev']} evaluations")
+        if not race or len(alive) == 1:
+            break
+        alive = sorted(alive, key=lambda r: r["cost"])[: (len(alive) + 1) // 2]
+        budget *= 2
     return runs
 
 
