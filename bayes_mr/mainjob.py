@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import xarray as xr
@@ -233,10 +234,11 @@ def _best_by_validation(rows: list[dict]) -> dict | None:
     return min(ok, key=lambda r: r["validation"]["force_nrmse"]) if ok else None
 
 
-def _posteriors_beside(first: dict, todo: list[Stage], part_a, part_b, budget: Budget, *, seed: int, out_dir: Path,
-                       say, clock: tuple[float, float], live: bool, timing: dict) -> tuple[dict, dict, str]:
-    """The posteriors (:func:`with_posteriors`) with the stages ``todo`` beside them in a child process
-    (:mod:`bayes_mr.mainjob_aside`; after them here without :attr:`Budget.aside`).
+def _posteriors_beside(first: dict, plan, part_a, part_b, budget: Budget, *, seed: int, out_dir: Path,
+                       say, clock: tuple[float, float], live: bool, timing: dict) -> tuple[dict, dict, str, dict]:
+    """The posteriors (:func:`with_posteriors`) with the stages ``plan(first)`` beside them in a child process
+    (:mod:`bayes_mr.mainjob_aside`); without :attr:`Budget.aside`, the stages ``plan(comparison)`` after them here
+    (planned for the final selection, so none has to run again).
 
     ``clock`` is (the comparison's start by :func:`time.perf_counter`, the job's by :func:`time.time`); ``timing``
     gets ``compare`` (first pass and posteriors) and ``beside_wait`` (the wait for the child after them).
@@ -248,8 +250,10 @@ def _posteriors_beside(first: dict, todo: list[Stage], part_a, part_b, budget: B
         Stage name → (value, wall seconds).
     where : str
         Where the stages ran.
+    planned : dict
+        What the stages were planned from (``first`` or ``comp``: its ``selected`` and rows).
     """
-    aside = start(todo, t0=clock[1], live=live) if budget.aside else None
+    aside = start(plan(first), t0=clock[1], live=live) if budget.aside else None
     try:
         comp = with_posteriors(first, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say)
     except BaseException:
@@ -259,16 +263,17 @@ def _posteriors_beside(first: dict, todo: list[Stage], part_a, part_b, budget: B
     timing["compare"] = _time.perf_counter() - clock[0]
     say(f"selected by {comp.get('selected_by') or comp['evidence_route']}: {comp['selected']}")
     if aside is None:
-        return comp, run_stages(todo, say), "this process, after the posteriors"
+        return comp, run_stages(plan(comp), say), "this process, after the posteriors", comp
     done, timing["beside_wait"], where = aside.collect(say)
-    return comp, done, where
+    return comp, done, where, first
 
 
-def _context_stages(first: dict, record, part_a, part_b, budget: Budget, stages, *, seed: int,
+def _context_stages(first: dict, *, record, part_a, part_b, budget: Budget, stages, seed: int,
                     out_dir: Path) -> list[Stage]:
     """The stages that need only the first pass (:mod:`bayes_mr.mainjob_aside`): the model choice under the other
-    residual model, the diagnosis of the form the first pass selects and the virtual shake table of the best
-    thesis form (as ``stages`` and the budget ask)."""
+    residual model, the diagnosis of the form ``first`` selects and the virtual shake table of its best thesis
+    form (as ``stages`` and the budget ask). ``first`` is the first pass, or the comparison with the posteriors
+    (whose least-squares rows are the first pass's)."""
     todo = [Stage("noise_sensitivity", noise_sensitivity, (part_a, budget.forms, budget.noise, first["rows"]),
                   {"seed": seed})]
     if "diagnose" in stages and budget.diagnose_s != 0 and first["selected"] is not None:
@@ -404,21 +409,22 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
 
     t = _time.perf_counter()
     first = first_pass(part_a, part_b, budget, seed=seed, say=say)
-    todo = _context_stages(first, record, part_a, part_b, budget, stages, seed=seed, out_dir=out_dir)
-    comp, done, where = _posteriors_beside(first, todo, part_a, part_b, budget, seed=seed, out_dir=out_dir, say=say,
-                                           clock=(t, _time.time() - (_time.perf_counter() - t0)),
-                                           live=progress is True, timing=timing)
+    plan = partial(_context_stages, record=record, part_a=part_a, part_b=part_b, budget=budget, stages=stages,
+                   seed=seed, out_dir=out_dir)
+    comp, done, where, src = _posteriors_beside(first, plan, part_a, part_b, budget, seed=seed, out_dir=out_dir,
+                                                say=say, clock=(t, _time.time() - (_time.perf_counter() - t0)),
+                                                live=progress is True, timing=timing)
     selected = comp["selected"]
     timing.update({name: wall for name, (_, wall) in done.items()})
     tab, spencer, params = _tables(comp, part_a, part_b, out_dir)
     sensitivity = done["noise_sensitivity"][0]
-    diag = _redone(done, "diagnose", "diagnose" in stages and budget.diagnose_s != 0, (first["selected"], selected),
+    diag = _redone(done, "diagnose", "diagnose" in stages and budget.diagnose_s != 0, (src["selected"], selected),
                    timing, say, diagnose_selected, record, selected, budget, rows=comp["rows"], seed=seed,
                    out_dir=out_dir, say=say) or {}
     second = None if other is None else _timed(timing, "second_record", second_record, validate, other, comp, diag,
                                                budget, like=part_a, out_dir=out_dir, say=say)
     thesis_form = best_thesis_form(comp)
-    vst = _redone(done, "shake_table", "shake_table" in stages, (best_thesis_form(first), thesis_form), timing, say,
+    vst = _redone(done, "shake_table", "shake_table" in stages, (best_thesis_form(src), thesis_form), timing, say,
                   shake_table, part_a, part_b, thesis_form, budget, seed=seed, out_dir=out_dir, say=say)
 
     best = _best_by_validation(comp["rows"])

@@ -82,3 +82,26 @@ def test_the_main_job_beside_the_posteriors_gives_the_in_process_numbers(tmp_pat
     assert beside["stages_where"]["stages"] == ["noise_sensitivity", "diagnose", "shake_table"]
     for key in ("noise_sensitivity", "diagnose", "shake_table"):
         assert _without_times(beside[key]) == _without_times(here[key]), key
+
+
+def test_without_the_child_the_stages_are_planned_for_the_final_selection(tmp_path, monkeypatch):
+    """When the posteriors change the first pass's choice, the diagnosis runs once, for the final selection."""
+    import bayes_mr.mainjob as mainjob
+
+    real_posteriors, real_diagnose, firsts, diagnosed = mainjob.with_posteriors, mainjob.diagnose_selected, [], []
+
+    def switched(first, *args, **kwargs):  # posteriors that end with the other form selected
+        firsts.append(first["selected"])
+        comp = real_posteriors(first, *args, **kwargs)
+        return {**comp, "selected": next(m for m in ("dahl", "lugre") if m != first["selected"])}
+
+    def spied(record, model, *args, **kwargs):
+        diagnosed.append(model)
+        return real_diagnose(record, model, *args, **kwargs)
+
+    monkeypatch.setattr(mainjob, "with_posteriors", switched)
+    monkeypatch.setattr(mainjob, "diagnose_selected", spied)
+    budget = replace(QUICK, forms=("dahl", "lugre"), duration_s=3.0, shake_table_engines=())
+    out = run(tmp_path, budget=budget, progress=False, stages=("compare", "diagnose"))
+    assert out["selected"] != firsts[0]
+    assert diagnosed == [out["selected"]] and out["selected"] in out["diagnose"]
