@@ -158,7 +158,7 @@ def _simulate_checks(args, kind: str, params: dict) -> None:
 
 def cmd_fit(args) -> int:
     from . import results
-    from .identify import Identify, engine
+    from .identify import Emcee, Identify, engine
 
     rec = _read(args.data, args)
     options = {}
@@ -174,6 +174,8 @@ def cmd_fit(args) -> int:
         options["evidence"] = args.evidence
     if (args.scheduler or args.workers is not None) and args.engine != "ukf":
         raise CLIError("--scheduler/--workers spread UKF training runs: use them with --engine ukf (or compare)")
+    if args.engine == "lsq":  # the starts from --seed, as an mcmc fit's least squares (Emcee.lsq_settings)
+        options["settings"] = Emcee.lsq_settings(args.seed)
     with _executor(args) as ex:
         options.update({"executor": ex} if ex is not None else {})
         job = Identify(args.model, engine(args.engine, **options), ranges=_ranges(args.prior),

@@ -150,8 +150,10 @@ def validation_scores(idata, record: xr.Dataset) -> dict:
 
 def units(pairs: list[tuple[str, str]], estimators: dict, seed: int) -> list[tuple[str, list[tuple[str, object]]]]:
     """The jobs of a grid: (model, [(engine, estimator)]) — one per pair, except a model's ``lsq`` and ``mcmc``,
-    which are one job when they share the least-squares fit (:func:`shares_lsq`)."""
-    est = {e: estimators.get(e) or engine(e) for _, e in pairs}
+    which are one job when they share the least-squares fit (:func:`shares_lsq`). An ``lsq`` not given searches
+    from the grid's ``seed`` (:meth:`~bayes_mr.inference.estimators.Emcee.lsq_settings`), as the chains do."""
+    est = {e: estimators.get(e) or (LeastSquares(settings=Emcee.lsq_settings(seed)) if e == "lsq" else engine(e))
+           for _, e in pairs}
     shared = ({m for m, e in pairs if e == "lsq" and (m, "mcmc") in pairs}
               if "lsq" in est and "mcmc" in est and shares_lsq(est["lsq"], est["mcmc"], seed) else set())
     units: list[tuple[str, list]] = []

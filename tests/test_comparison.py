@@ -212,3 +212,12 @@ def test_lsq_and_mcmc_rows_share_one_least_squares_fit():
         assert a["engine"] == b["engine"]
         assert a["log_evidence"] == b["log_evidence"] and a["params"] == b["params"]
         assert a["params_sd"] == b["params_sd"] and a["mse"] == b["mse"]
+
+
+def test_a_grid_searches_least_squares_from_its_own_seed_and_shares_the_fit_with_the_chain():
+    """compare(seed=3): the lsq rows' starts come from seed 3, as the chains' least squares do (one fit for both)."""
+    from bayes_mr.fit_jobs import units
+
+    for seed in (0, 3):
+        [(model, ests)] = units([("dahl", "lsq"), ("dahl", "mcmc")], {}, seed)
+        assert [e for e, _ in ests] == ["lsq", "mcmc"] and ests[0][1].settings.seed == seed

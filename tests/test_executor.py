@@ -264,3 +264,4 @@ def test_fit_flags_only_with_the_ukf(tmp_path, record, capsys):
     path = write_record(record, tmp_path / "dev.nc")
     assert main(["fit", str(path), "--model", "dahl", "--engine", "lsq", "--workers", "2", "--quiet"]) == 2
     assert "--engine ukf" in capsys.readouterr().err
+
