@@ -77,6 +77,25 @@ def test_device_fit_reports_force_nrmse(tmp_path, device_csv):
     assert fit["params"]["f0"] == pytest.approx(-100, rel=0.05)
 
 
+def test_fit_with_least_squares_searches_from_the_seed_given(tmp_path, monkeypatch):
+    """``fit --engine lsq --seed 3``: the starts come from seed 3, as an mcmc fit's least squares do."""
+    from bayes_mr import identify
+
+    seeds = []
+
+    def recorded(self, record, *, seed=0, progress=True):
+        seeds.append((self.estimator.settings.seed, seed))
+        raise ValueError("stopped after the estimator was built")
+
+    monkeypatch.setattr(identify.Identify, "fit", recorded)
+    path = tmp_path / "short.csv"
+    assert main(["simulate", "--model", "dahl", "--signal", "blwn", "--amplitude", "0.004", "--fmax", "10",
+                 "--duration", "2", "--fs", "250", "--mass", "50", "-o", str(path)]) == 0
+    for seed in ("0", "3"):
+        main(["fit", str(path), "--mass", "50", "--model", "dahl", "--engine", "lsq", "--seed", seed, "--quiet"])
+    assert seeds == [(0, 0), (3, 3)]
+
+
 def test_fit_takes_the_mcmc_evidence_route_from_the_command_line(tmp_path, monkeypatch):
     """``--evidence laplace``: the chain's fit reports the Laplace route and no ladder ran (its rungs would be in
     ``evidence_routes`` as ti/ss). The chain is cut at 250 steps: the route is the point, not the posterior
