@@ -268,13 +268,12 @@ def side_by_side(fn: Callable, jobs: Sequence[tuple]) -> list:
     """``[fn(*args) for args in jobs]``, the calls side by side on :func:`local_threads` where there can be.
 
     For the few independent refinements of one fit (a search's starts): results in the order of ``jobs``; a call
-    that raises raises here (the first in that order), after the others have finished.
+    that raises raises here (the first in that order; calls not started yet are cancelled, running ones finish).
     """
     with local_threads() as pool:
         if pool is None:
             return [fn(*args) for args in jobs]
-        futures = [pool.submit(call_single_threaded, fn, *args) for args in jobs]
-        return [f.result() for f in futures]
+        return list(pool.map(lambda args: call_single_threaded(fn, *args), jobs))
 
 
 @contextlib.contextmanager

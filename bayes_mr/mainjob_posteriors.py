@@ -24,7 +24,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from .executor import Outcome, local_threads, run_jobs
-from .fit_jobs import FIT_ERRORS, error_row, free_parameters, least_squares, lsq_mcmc_job, row_message
+from .fit_jobs import (FIT_ERRORS, error_row, free_parameters, least_squares, lsq_mcmc_job, row_message,
+                       unit_results)
 from .identify import Emcee, LeastSquares
 from .inference.budget import over_budget
 
@@ -74,7 +75,8 @@ def least_squares_pass(part_a, part_b, forms, *, seed: int, noise: str, say) -> 
 
     def finished(o: Outcome) -> None:
         form = forms[o.index]
-        fit, row, data = o.value if o.ok else (None, error_row(form, "lsq", RuntimeError(o.error), o.wall_s), None)
+        # a job that raised past its own FIT_ERRORS: the grid's error row for that outcome (fit_jobs.unit_results)
+        fit, row, data = o.value if o.ok else (None, unit_results(o, form, ["lsq"])[0][1], None)
         rows[o.index] = row
         if fit is not None:
             fitted[form] = fit
