@@ -26,7 +26,7 @@ import numpy as np
 import xarray as xr
 
 from ..inference.lsq import LSQResult, LSQSettings, fit_lsq, laplace
-from ..inference.refine import refine
+from ..inference.refine import Stall, refine
 from ..likelihood import OutputError
 from ..models import Model, get_model
 from ..scores import score
@@ -164,7 +164,7 @@ def costs(lik: OutputError, starts: np.ndarray, sd: np.ndarray) -> np.ndarray:
 
 
 def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
-          n_refine: int = 2, max_nfev: int = MAX_NFEV) -> tuple[Fit, list[dict]]:
+          n_refine: int = 2, max_nfev: int = MAX_NFEV, stall: Stall | None = None) -> tuple[Fit, list[dict]]:
     """Fit ``lik``'s model from given starts: screen them by cost, refine the best, Laplace.
 
     Parameters
@@ -183,11 +183,15 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
         cheapest others.
     max_nfev : int
         Most residual evaluations per refinement.
+    stall : Stall, optional
+        Stop each refinement of a start on a crawl (:class:`~bayes_mr.inference.refine.Stall`; the re-weighting
+        that follows runs without it): the fit is then a little short of the optimum, by about what the crawl
+        would still gain.
 
     Returns
     -------
     Fit, list of dict
-        The fit and one record per refined start (initial and final cost).
+        The fit and one record per refined start (initial and final cost, ``stalled``).
     """
     c = costs(lik, starts, sd)
     # the first start is refined in any case (diagnose passes the base model's
@@ -199,9 +203,9 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
     for j in order[:n_refine]:
         if not np.isfinite(c[j]):
             continue
-        res = refine(lik, starts[j], sd, max_nfev)
+        res = refine(lik, starts[j], sd, max_nfev, stall=stall)
         runs.append({"start": int(j), "cost0": float(0.5 * c[j]), "cost": float(res.cost), "phi": res.x,
-                     "nfev": int(res.nfev)})
+                     "nfev": int(res.nfev), "stalled": bool(res.status == -2)})
     if not runs:
         raise RuntimeError(f"{lik.model.name}: every start diverged")
     best = min(runs, key=lambda r: r["cost"])

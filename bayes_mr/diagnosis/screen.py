@@ -47,6 +47,7 @@ import xarray as xr
 from scipy.stats import qmc
 
 from ..executor import Outcome, run_jobs, share
+from ..inference.refine import Stall
 from ..likelihood import OutputError
 from ..models import EFFECTS, Effect, Model
 from ..models.effects import DEVICE_ONLY, ON_COMMAND
@@ -68,6 +69,18 @@ from .residuals import envelope, varying_voltage
 #: normalized-Bouc–Wen and dahl+voltage_dependence records, structure and device): best clean score 7.0
 #: (stribeck_friction on a structure record) — all none, but with a margin of 1 only.
 THRESHOLD = 8.0
+
+#: When the screen's refinements stop: after three accepted steps that together gained less than 0.05 nats.
+#: Measured on the bench's diagnose (dahl + a hidden offset, 30 s at 1 kHz): shear_thinning's two refinements
+#: crawl along a c0/c_p ridge, 0.2 nats in their last 30 of 60 evaluations (a quarter of the diagnosis's
+#: simulations), and end with scores of −1 either way. A stalled refit is short of its optimum by about what
+#: the crawl would still gain there (≤ 0.3 nats measured): scores only go down by it, so a clean record raises
+#: no new alarm; a kept effect whose fit the rule stopped is refined on from there before it is reported or
+#: built on (:func:`.search.settled`). Used by a round's ranking (:func:`screen`) only: the ranked route's later additions
+#: (:func:`.search.ranked_select`), whose fits become the model, refine to the end as before — with the rule there
+#: too, the main job's spencer additions (20 parameters, ends at ``max_nfev``) stopped elsewhere and its term
+#: search took another path (a different third term, 300 s instead of 120 s).
+STALL = Stall(steps=3, nats=0.05)
 
 #: Grid points of a one-parameter effect; Latin-hypercube points of a larger one.
 N_GRID = 9
@@ -300,8 +313,10 @@ def score(base: Fit, ext: Fit, effect: Effect) -> tuple[float, float, float, flo
     return dll / kappa + occam, kappa, float(dll), occam
 
 
-def screen_one(record: xr.Dataset, base: Fit, effect: Effect, *, seed: int = 0) -> Candidate:
-    """Fit ``base.model + effect`` warm-started at ``base`` and score it."""
+def screen_one(record: xr.Dataset, base: Fit, effect: Effect, *, seed: int = 0,
+               stall: Stall | None = None) -> Candidate:
+    """Fit ``base.model + effect`` warm-started at ``base`` and score it; ``stall`` stops its refinements on a
+    crawl (:func:`screen` passes :data:`STALL`: a ranking's fits give scores; a fit that is built on does not)."""
     model = base.model + effect
     ranges = effect_ranges(model, record, base.lik.scales)
     try:
@@ -310,7 +325,7 @@ def screen_one(record: xr.Dataset, base: Fit, effect: Effect, *, seed: int = 0) 
         # the base's likelihood class (a measurement chain, :mod:`.chain`, stays on for its extensions)
         lik = type(base.lik)(model, record, ranges=ranges, scales=base.lik.scales, residual=base.lik.residual)
         starts = effect_starts(lik, base.params(), effect, seed)
-        ext, runs = refit(lik, starts, base.result.sigma)
+        ext, runs = refit(lik, starts, base.result.sigma, stall=stall)
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         return Candidate(effect.name, effect, None, -math.inf, error=str(exc))
     return scored(base, ext, effect, runs=runs)
@@ -379,9 +394,9 @@ def _screen_delay(record: xr.Dataset, base: Fit, effect: Effect, ranges: dict) -
                      ext.result.log_evidence - base.result.log_evidence, ext.mse / base.mse, runs=runs)
 
 
-def screen_job(record: xr.Dataset, base: Fit, effect: Effect, seed: int) -> Candidate:
+def screen_job(record: xr.Dataset, base: Fit, effect: Effect, seed: int, stall: Stall | None) -> Candidate:
     """:func:`screen_one` as a job for an executor (module level, positional, picklable)."""
-    return screen_one(record, base, effect, seed=seed)
+    return screen_one(record, base, effect, seed=seed, stall=stall)
 
 
 def _candidate(effect: Effect, o: Outcome) -> Candidate:
@@ -411,8 +426,8 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
 
     # the costliest first on an executor (an effect's fit costs about as its parameters: shear_thinning's three
     # were a quarter of the bench's diagnose, and when submitted last they ended the round alone)
-    outcomes = run_jobs(screen_job, [(rec, fitted, e, seed) for e in effects], executor=executor, on_done=finished,
-                        cost=[len(e.params) for e in effects])
+    jobs = [(rec, fitted, e, seed, STALL) for e in effects]  # a ranking: its refinements stop on a crawl
+    outcomes = run_jobs(screen_job, jobs, executor=executor, on_done=finished, cost=[len(e.params) for e in effects])
     out = [_candidate(e, o) for e, o in zip(effects, outcomes)]
     return sorted(out, key=lambda c: -c.score if math.isfinite(c.score) else math.inf)
 

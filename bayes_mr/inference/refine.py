@@ -11,6 +11,8 @@ evidence) and :mod:`bayes_mr.diagnosis` (candidate refits) call it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import optimize
 
@@ -92,8 +94,36 @@ class Residuals:
 FTOL = 1e-10
 
 
+@dataclass(frozen=True)
+class Stall:
+    """Stop a refinement whose last ``steps`` accepted steps together lowered ½Σr² by less than ``nats``.
+
+    With residuals standardised by the noise SDs, ½Σr² is −ln L up to a
+    constant, so ``nats`` is a log-likelihood: a refinement crawling along a
+    ridge at that rate is stopped where what it could still gain is far below
+    what a caller decides on (diagnose's screen: a threshold of 8 on a score
+    of Δℓ/κ). The point returned is the last accepted one; scipy's status is −2.
+    A caller that builds on the point (the next round's base) refines it again
+    without a stall rule.
+    """
+
+    steps: int = 3
+    nats: float = 0.05
+
+    def callback(self):
+        """A fresh ``least_squares`` callback applying the rule (it raises StopIteration)."""
+        seen: list[float] = []
+
+        def check(intermediate_result):
+            seen.append(float(intermediate_result.cost))
+            if len(seen) > self.steps and seen[-1 - self.steps] - seen[-1] < self.nats:
+                raise StopIteration
+
+        return check
+
+
 def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
-           cap: int | None = None) -> optimize.OptimizeResult:
+           cap: int | None = None, stall: Stall | None = None) -> optimize.OptimizeResult:
     """Bounded trust-region least squares (scipy's ``trf``, ``x_scale="jac"``) of :class:`Residuals` from φ₀.
 
     Parameters
@@ -107,11 +137,13 @@ def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
         Most residual evaluations.
     cap : int, optional
         Most sub-steps per sample interval (:class:`Residuals`).
+    stall : Stall, optional
+        Stop early on a crawl (:class:`Stall`); None: only scipy's tolerances and ``max_nfev`` stop it.
 
     Returns
     -------
     scipy.optimize.OptimizeResult
-        ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status``.
+        ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (−2: stopped by ``stall``).
     """
     res_fn = Residuals(lik, sd, cap)
     lo, hi = lik.phi_lo, lik.phi_hi
@@ -119,4 +151,5 @@ def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
     return optimize.least_squares(
         res_fn, x0, jac=res_fn.jacobian, bounds=(lo, hi), method="trf",
         x_scale="jac", xtol=1e-12, ftol=FTOL, gtol=1e-12, max_nfev=max_nfev,
+        callback=None if stall is None else stall.callback(),
     )
