@@ -81,3 +81,23 @@ def test_a_kept_effect_is_refined_past_the_screens_stall(stribeck_record, monkey
     assert [c.name for c in selected] == ["stribeck_friction"]
     assert selected[0].fit.result.log_likelihood == pytest.approx(free.fit.result.log_likelihood, abs=1e-3)
     assert [c.name for c in rounds[1]] == ["force_offset"] and rounds[1][0].score < 8.0
+
+
+def test_restart_allows_stalled_starts_their_slack(monkeypatch):
+    """Two refined starts that stopped on the stall rule 0.5 nats apart are one basin (no global search); the same
+    spread without a stall, on a cost of 1500 (1e-4 relative is 0.15), is two basins and searches again."""
+    from bayes_mr.diagnosis import search
+    from bayes_mr.diagnosis.screen import Candidate
+
+    ran = []
+    monkeypatch.setattr(search, "global_refit", lambda fit, own, seed=0: (ran.append(own) or fit, {"ran": True}))
+    effect = EFFECTS["stribeck_friction"]
+
+    def cand(stalled):
+        runs = [{"cost": 1500.0, "stalled": stalled}, {"cost": 1500.5, "stalled": stalled}]
+        return Candidate("stribeck_friction", effect, object(), 20.0, runs=runs)
+
+    one = search.restarted(None, cand(True))
+    assert "skipped" in one.restart and "stalled" in one.restart["skipped"] and not ran
+    two = search.restarted(None, cand(False))
+    assert two.restart == {"ran": True} and ran == [["F_st", "v_s"]]
