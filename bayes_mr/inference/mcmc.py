@@ -92,7 +92,15 @@ still be far from the target, and independent walkers would sit where it underwe
 alone, after one round (accepting 0.08), a chain of 8 independent walkers reached τ 6.6
 and R-hat 1.013 in 954 steps; in the bench run its walkers stayed apart (R-hat 69 after
 650 steps, τ 31) — a q that depends on how many rounds the clock allowed. All five
-posteriors of the main job settle (each by one rule or the other).
+posteriors of the main job settle (each by one rule or the other). So with a wall-time
+budget the rounds may spend what it leaves after the chain proper's first
+:data:`~bayes_mr.inference.budget.MIN_CHAIN_STEPS` steps at the pilot's cost per walker
+(the projection the run was started on), not a fixed share of it: with half the budget
+(until stop 57) that same posterior settled in two rounds (0.07 → 0.40; then 400 steps of
+8 walkers, R-hat 1.0099, 305 s) in one bench run and, an hour later on the same machine,
+had its second round cut at 240 s and stopped unconverged on the mixture (625 steps of 16
+walkers, R-hat 1.0147, 480 s); with the reserve it ended its rounds by the rules above
+and converged as in the first (324 s, the second hour).
 
 Walkers. The pilot and the rounds run 4·d walkers: differential evolution and the
 snooker update explore with the differences between walkers, and the proposal is
@@ -143,6 +151,7 @@ import emcee
 import numpy as np
 
 from ..synthetic_noise import as_seed_sequence
+from .budget import MIN_CHAIN_STEPS
 from .chain import MCMCResult
 from .checkpoint import open_backend, run_seeds
 from .convergence import run_until_converged, tail_index
@@ -241,8 +250,11 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
     it over the adaptation rounds (module docstring: :data:`ADAPT_ACCEPT`, :data:`ADAPT_GAIN`).
 
     Each part's seed is a fixed child of the run's and has its own HDF5 group (``<group>_pilot``,
-    ``<group>_adapt<k>``), so a resumed run refits the same proposal. Pilot and rounds together may spend
-    half of a wall-time budget: the chain proper gets the rest.
+    ``<group>_adapt<k>``), so a resumed run refits the same proposal. With a wall-time budget the rounds may
+    spend what it leaves after :data:`~bayes_mr.inference.budget.MIN_CHAIN_STEPS` steps of the chain proper
+    at the pilot's measured cost per walker (:func:`_chain_reserve`): the projection
+    :func:`~bayes_mr.inference.budget.check_budget` started the run on. Their number is then set by the
+    rules above, not by the machine's speed, unless the budget is too tight for them.
 
     Returns
     -------
@@ -258,16 +270,16 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
         The chain's settings, its wall-time budget less what the pilot and rounds spent, and the rounds'
         moves (``adapt_moves``) where the adaptation did not settle (module docstring).
     """
-    half = None if settings.max_seconds is None else 0.5 * settings.max_seconds
-    pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves), max_seconds=half,
+    pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves),
                              max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
                              seed=_child(settings.seed, PILOT_KEY))
     part = sample(log_prob, x0_center, x0_cov, pilot_settings, names=names, initial=initial,
                   group=group + "_pilot", bounds=bounds)
     proposal = fit_proposal(_second_half(part), bounds)
     spent, steps, acceptance, settled = part.wall_s, part.n_steps, [], False
+    allowance = None if settings.max_seconds is None else settings.max_seconds - _chain_reserve(part, settings)
     for k in range(settings.adapt_rounds):
-        left = None if half is None else half - spent
+        left = None if allowance is None else allowance - spent
         if left is not None and left <= 0:
             break
         n = settings.adapt_steps
@@ -290,6 +302,14 @@ def _pilot(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, 
         settings = replace(settings, moves=settings.adapt_moves)
     chain_start = part.chain[-1, :settings.walkers_after_pilot(part.chain.shape[-1])]
     return chain_start, proposal, steps, tuple(acceptance), settings
+
+
+def _chain_reserve(pilot: MCMCResult, settings: MCMCSettings) -> float:
+    """Seconds the chain proper's first :data:`~bayes_mr.inference.budget.MIN_CHAIN_STEPS` steps cost at the
+    pilot's measured cost per step and walker (its walkers after the pilot: ``settings.walkers_after_pilot``)."""
+    n_steps, n_walkers, d = pilot.chain.shape
+    per_walker_step = pilot.wall_s / max(n_steps * n_walkers, 1)
+    return MIN_CHAIN_STEPS * settings.walkers_after_pilot(d) * per_walker_step
 
 
 def _second_half(res: MCMCResult) -> np.ndarray:

@@ -220,6 +220,35 @@ def test_a_wall_time_budget_stops_the_run_and_says_so():
     assert late.converged and late.stopped == "converged"
 
 
+def test_a_budget_that_leaves_room_for_the_chain_does_not_change_the_adaptation():
+    """A slow density (3 ms a call) and a budget of 1.8 × what the unbudgeted run's pilot and rounds took: the
+    rounds may spend what the budget leaves after the chain proper's first MIN_CHAIN_STEPS steps, so they end by
+    their own rules, as without a budget, and the chain is the unbudgeted one's, step for step, until the clock
+    stops it. (With half the budget for pilot and rounds, the old rule, the last round was cut short: a q that
+    depended on the machine's speed.)"""
+    import time
+
+    mu, C, _, fast = correlated_gaussian(4, seed=2)
+    calls = []
+
+    def slow(X):
+        calls.append((time.perf_counter(), len(X)))
+        time.sleep(0.003)
+        return fast(X)
+
+    sample(fast, mu, C, MCMCSettings(seed=3, progress=False))  # one-off costs (imports, first checks) not timed
+    free = sample(slow, mu, C, MCMCSettings(seed=3, progress=False))
+    # the chain proper (8 walkers, the independence move alone) evaluates all 8 at once, call after call; the
+    # pilot and rounds (16 walkers, mixed moves) never end on such a run: where it starts, the adaptation ended
+    # — its wall time as this run measured it (sleep, density and emcee's own work)
+    t, size = np.array(calls).T
+    adaptation = t[len(size) - np.argmax(size[::-1] != 8)] - t[0]
+    timed = sample(slow, mu, C, MCMCSettings(seed=3, progress=False, max_seconds=1.8 * adaptation))
+    assert timed.pilot_steps == free.pilot_steps and timed.adapt_acceptance == free.adapt_acceptance
+    assert 0 < timed.n_steps <= free.n_steps
+    assert np.array_equal(timed.chain, free.chain[:timed.n_steps])
+
+
 def test_a_chain_that_cannot_meet_the_rule_in_its_budget_stops_when_that_is_projected():
     """30-d correlated target, differential-evolution moves alone, 1 ms a call, a 3-s budget: the chain's
     integrated time projects the rule (≈ 55 τ steps) past the budget within a few checks, and the run stops
