@@ -51,8 +51,10 @@ class MCMCSettings:
     max_seconds : float or None
         Wall-time budget of the call [s]: the run stops after the step that exceeds it, or at an earlier
         check where its own integrated time projects the rule past it (``"projected"``,
-        :func:`~.convergence.projection`), flagged not converged (``stopped`` says why). A budgeted run
-        depends on the machine's speed, so it is not reproducible step for step; None (default): no budget.
+        :func:`~.convergence.projection`), flagged not converged (``stopped`` says why). Where it is
+        stopped depends on the machine's speed; the steps up to there do not, as long as the budget leaves the
+        adaptation rounds room to end by their own rules (:func:`~.mcmc.sample`'s pilot reserves the chain
+        proper's first steps, :data:`~.budget.MIN_CHAIN_STEPS`); None (default): no budget.
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
