@@ -26,7 +26,7 @@ import numpy as np
 import xarray as xr
 
 from ..inference.lsq import LSQResult, LSQSettings, fit_lsq, laplace
-from ..inference.refine import Stall, refine
+from ..inference.refine import STALLED, Stall, refine
 from ..likelihood import OutputError
 from ..models import Model, get_model
 from ..scores import score
@@ -205,7 +205,7 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
             continue
         res = refine(lik, starts[j], sd, max_nfev, stall=stall)
         runs.append({"start": int(j), "cost0": float(0.5 * c[j]), "cost": float(res.cost), "phi": res.x,
-                     "nfev": int(res.nfev), "stalled": bool(res.status == -2)})
+                     "nfev": int(res.nfev), "stalled": bool(res.status == STALLED)})
     if not runs:
         raise RuntimeError(f"{lik.model.name}: every start diverged")
     best = min(runs, key=lambda r: r["cost"])

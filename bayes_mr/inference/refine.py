@@ -94,6 +94,10 @@ class Residuals:
 FTOL = 1e-10
 
 
+#: scipy ``least_squares``' status when its callback raised StopIteration: a refinement :class:`Stall` stopped.
+STALLED = -2
+
+
 @dataclass(frozen=True)
 class Stall:
     """Stop a refinement whose last ``steps`` accepted steps together lowered ½Σr² by less than ``nats``.
@@ -102,7 +106,7 @@ class Stall:
     constant, so ``nats`` is a log-likelihood: a refinement crawling along a
     ridge at that rate is stopped where what it could still gain is far below
     what a caller decides on (diagnose's screen: a threshold of 8 on a score
-    of Δℓ/κ). The point returned is the last accepted one; scipy's status is −2.
+    of Δℓ/κ). The point returned is the last accepted one; scipy's status is :data:`STALLED`.
     A caller that builds on the point (the next round's base) refines it again
     without a stall rule.
     """
@@ -143,7 +147,7 @@ def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
     Returns
     -------
     scipy.optimize.OptimizeResult
-        ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (−2: stopped by ``stall``).
+        ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (:data:`STALLED`: stopped by ``stall``).
     """
     res_fn = Residuals(lik, sd, cap)
     lo, hi = lik.phi_lo, lik.phi_hi
