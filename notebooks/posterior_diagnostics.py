@@ -15,14 +15,14 @@
 # # Posterior diagnostics of an emcee fit
 #
 # One short simulated structure test of a Dahl damper, fitted by least squares and by the
-# emcee posterior of the same output-error likelihood (`bayes_mr.likelihood.OutputError`),
+# emcee posterior of the same output-error likelihood (`bayes_mr.likelihood.output_error.OutputError`),
 # then checked the way a posterior should be checked before anybody believes it:
 #
 # 1. trace and pair plots (mixing, correlations, shape of the posterior);
 # 2. R-hat and effective sample sizes;
 # 3. LOO (PSIS) and WAIC from the pointwise log-likelihood;
 # 4. coverage of the true parameters (known here, because the record is simulated);
-# 5. the UKF against the MCMC posterior (`bayes_mr.inference.crosscheck.ukf_vs_mcmc`).
+# 5. the UKF against the MCMC posterior (`bayes_mr.inference.ukf.crosscheck.ukf_vs_mcmc`).
 #
 # Everything is small and seeded so the notebook runs in about a minute; it is executed by
 # `tests/test_notebooks.py`, and the `assert`s below are part of that test.
@@ -40,17 +40,17 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore", FutureWarning)  # "ArviZ is undergoing a major refactor"
     import arviz as az
 
-from bayes_mr.inference import ukf
-from bayes_mr.inference import ukf_kernel as K
-from bayes_mr.inference.crosscheck import ukf_vs_mcmc
-from bayes_mr.inference.lsq import fit_lsq
-from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.inference.ukf import kernel as K
+from bayes_mr.inference.ukf.crosscheck import ukf_vs_mcmc
+from bayes_mr.inference.lsq.least_squares import fit_lsq
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc
 from bayes_mr.inference.mcmc_posterior import mcmc_posterior
-from bayes_mr.results import build
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.results import build
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 # The batches here are small (12 walkers × 500 samples per call): numba's threads cost more in
 # start-up and synchronisation than they save (MCMC 32 s on one thread against 66 s on two, on a

@@ -1,7 +1,7 @@
 """Measure TMCMC against TI and stepping-stone on the same problems (issue 14, item 1).
 
 Single process, small problems; every route's likelihood evaluations are counted
-(:class:`bayes_mr.inference.tmcmc.Counted`). TI/SS count the β = 1 emcee posterior
+(:class:`bayes_mr.inference.evidence.tmcmc.Counted`). TI/SS count the β = 1 emcee posterior
 (which they need: it is the top rung and fits the reference q) plus the ladder;
 the least-squares fit that starts the linear-device and dahl posteriors is not
 counted (a few hundred evaluations). One JSON line per (case, seed, route)::
@@ -25,10 +25,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests")]
 
-from bayes_mr.inference.evidence import stepping_stone, thermodynamic_integration  # noqa: E402
-from bayes_mr.inference.ladder import run_ladder  # noqa: E402
-from bayes_mr.inference.mcmc import MCMCSettings, sample, start_from_lsq  # noqa: E402
-from bayes_mr.inference.tmcmc import Counted, TMCMCSettings, run_tmcmc  # noqa: E402
+from bayes_mr.inference.evidence.routes import stepping_stone, thermodynamic_integration  # noqa: E402
+from bayes_mr.inference.evidence.ladder import run_ladder  # noqa: E402
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample, start_from_lsq  # noqa: E402
+from bayes_mr.inference.evidence.tmcmc import Counted, TMCMCSettings, run_tmcmc  # noqa: E402
 
 QUICK = dict(progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)
 
@@ -45,8 +45,8 @@ def problem(case: str):
 
         target, modes, C, log_z = bimodal_target()
         return target, modes[0], C, log_z
-    from bayes_mr.inference.lsq import fit_lsq
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference.lsq.least_squares import fit_lsq
+    from bayes_mr.likelihood.output_error import OutputError
 
     if case == "linear":
         from inference.test_evidence import linear_device_problem

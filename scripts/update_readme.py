@@ -17,7 +17,7 @@ the packaged record (``--quick``, another budget or record) unless ``--force``.
 study's ``report.md``, full or ``--quick`` as the README's text says, (its title dropped, its figures
 copied into ``figures/`` as ``NAME_FILE.png``) between ``<!-- NAME:start -->``
 and ``<!-- NAME:end -->``. The text of each section is
-built by :mod:`bayes_mr.report.readme`; the rest of the README is left alone.
+built by :mod:`bayes_mr.run.readme`; the rest of the README is left alone.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from bayes_mr.report.readme import bench_section, readme_figures, run_section
+from bayes_mr.run.readme import bench_section, readme_figures, run_section
 
 #: The README this script writes (the repository's, beside ``scripts/``).
 README = Path(__file__).resolve().parents[1] / "README.md"

@@ -9,7 +9,7 @@
 # The working likelihood (iid, or AR by BIC per channel) counts every sample as new information. Under
 # model error the residual is smooth in time, so between two *wrong* forms ln BF ≈ (N/2)·ln(SSR ratio)
 # grows with the sampling rate at a fixed record length, not with what the record holds. This study
-# measures it, and the magnitude-adjusted (calibrated) evidence of `bayes_mr.inference.evidence_scale`
+# measures it, and the magnitude-adjusted (calibrated) evidence of `bayes_mr.inference.lsq.evidence_scale`
 # beside it, through `compare` itself (least squares, Laplace route).
 #
 # * **Hidden effect, no true candidate.** Simulated structure tests (50 kg frame, 3 s) of Dahl with a
@@ -35,12 +35,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_mr.comparison import compare
+from bayes_mr.selection.comparison import compare
 from bayes_mr.models import get_model
 from bayes_mr.report import figures
 from bayes_mr.report.markdown import markdown_table
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 MASS, NOISE, DURATION = 50.0, 0.02, 3.0
 RATES = (250.0, 1000.0, 4000.0)

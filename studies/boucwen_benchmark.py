@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayes_mr import results
-from bayes_mr.comparison import compare, table
+from bayes_mr.inference import results
+from bayes_mr.selection.comparison import compare, table
 from bayes_mr.data import load_packaged
-from bayes_mr.identify import Identify, LeastSquares, predict, validate
+from bayes_mr.inference.identify import Identify, LeastSquares, predict, validate
 from bayes_mr.report import figures
 from bayes_mr.report.markdown import markdown_table
 

@@ -41,13 +41,13 @@ import pandas as pd
 from scipy import stats
 
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares
-from bayes_mr.inference.mcmc import MCMCSettings
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.report import figures
 from bayes_mr.report.markdown import markdown_table
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 MASS = 50.0
 FS, DURATION = 250.0, 6.0

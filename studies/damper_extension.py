@@ -34,11 +34,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bayes_mr import results  # noqa: E402
+from bayes_mr.inference import results  # noqa: E402
 from bayes_mr.diagnosis.extend import extend  # noqa: E402
-from bayes_mr.identify import Identify, LeastSquares, predict  # noqa: E402
-from bayes_mr.mainjob import FULL, QUICK, prepare  # noqa: E402
-from bayes_mr.progress import say as progress_say  # noqa: E402
+from bayes_mr.inference.identify import Identify, LeastSquares, predict  # noqa: E402
+from bayes_mr.run.job import FULL, QUICK, prepare  # noqa: E402
+from bayes_mr.execution.progress import say as progress_say  # noqa: E402
 
 
 def _worst_window(t: np.ndarray, resid: np.ndarray, width: float = 0.5) -> slice:

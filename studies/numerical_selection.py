@@ -27,14 +27,14 @@ import numpy as np
 import pandas as pd
 
 from bayes_mr.report import figures
-from bayes_mr.inference.lsq import fit_lsq
-from bayes_mr.inference.ukf import TAUS
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.least_squares import fit_lsq
+from bayes_mr.inference.ukf.filter import TAUS
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.report.markdown import markdown_table
-from bayes_mr.selection import validation
+from bayes_mr.selection import thesis_methods as validation
 from bayes_mr.signals import make_signal, thesis_signal
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 
 TRUTH = {"c": 100.0, "k": 2.0e4, "F_d": 25.0, "sigma": 2500.0}
 MASS = 50.0

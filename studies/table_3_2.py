@@ -27,11 +27,11 @@ import pandas as pd
 from bayes_mr.report import figures
 from bayes_mr.report.markdown import markdown_table
 from bayes_mr.data.ground_motions import load_ground_motion
-from bayes_mr.inference import ukf
-from bayes_mr.inference import ukf_kernel as K
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.inference.ukf import kernel as K
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
-from bayes_mr.simulate import simulate, synthesize
+from bayes_mr.simulation.simulate import simulate, synthesize
 
 TRUTH = {"c": 0.3, "k": 9.0, "beta1": 2.0, "gamma": 1.0, "n": 2.0}
 MASS = 0.2

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from bayes_mr.mainjob import FULL, QUICK, THESIS_FORMS, prepare, shake_table
+from bayes_mr.run.job import FULL, QUICK, THESIS_FORMS, prepare, shake_table
 from bayes_mr.report.markdown import markdown_table
-from bayes_mr.results import write_json
+from bayes_mr.inference.results import write_json
 
 
 def main(out_dir: str | Path = "results/studies/virtual-shake-table", quick: bool = False, seed: int = 0) -> dict:

@@ -17,7 +17,7 @@ import xarray as xr
 from bayes_mr.data.schema import make_record
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 
 # --- ground and imposed motions --------------------------------------------------------
 
@@ -222,7 +222,7 @@ def coverage_study():
     """``studies/coverage.py`` as a module (its families of simulated records; a study, not a package module)."""
     import importlib.util
 
-    from bayes_mr.cli import studies_dir
+    from bayes_mr.cli.commands import studies_dir
 
     spec = importlib.util.spec_from_file_location("coverage_study", studies_dir() / "coverage.py")
     module = importlib.util.module_from_spec(spec)

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from bayes_mr.cli import main
+from bayes_mr.cli.commands import main
 from bayes_mr.data import load
 
 FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
@@ -79,7 +79,7 @@ def test_device_fit_reports_force_nrmse(tmp_path, device_csv):
 
 def test_fit_with_least_squares_searches_from_the_seed_given(tmp_path, monkeypatch):
     """``fit --engine lsq --seed 3``: the starts come from seed 3, as an mcmc fit's least squares do."""
-    from bayes_mr import identify
+    from bayes_mr.inference import identify
 
     seeds = []
 
@@ -102,7 +102,7 @@ def test_fit_takes_the_mcmc_evidence_route_from_the_command_line(tmp_path, monke
     (measured: its 8 independent walkers met the rule after 200, τ 1.8)."""
     from functools import partial
 
-    from bayes_mr.inference import mcmc
+    from bayes_mr.inference.mcmc import sampler as mcmc
 
     monkeypatch.setattr(mcmc, "MCMCSettings", partial(mcmc.MCMCSettings, max_steps=250))
     path = tmp_path / "short.csv"
@@ -144,6 +144,6 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, structure_csv, capsy
 @pytest.mark.parametrize("argv", [["run", "--quick", "--no-readme"], ["bench", "--no-readme", "--json", "b.json"]])
 def test_no_readme_is_still_accepted(argv):
     """--no-readme is kept as a no-op: run and bench never write README.md (scripts/update_readme.py does)."""
-    from bayes_mr.cli import build_parser
+    from bayes_mr.cli.commands import build_parser
 
     assert build_parser().parse_args(argv).no_readme

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from bayes_mr.cli import main
-from bayes_mr.comparison import compare, crosscheck, selection_route
-from bayes_mr.identify import UKF, Emcee, Identify
-from bayes_mr.inference.mcmc import MCMCSettings
+from bayes_mr.cli.commands import main
+from bayes_mr.selection.comparison import compare, crosscheck, selection_route
+from bayes_mr.inference.identify import UKF, Emcee, Identify
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
 from records import offset_device_record
 
 FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",
@@ -196,9 +196,9 @@ def test_selection_route_names_the_route_the_evidence_came_by():
 
 def test_lsq_and_mcmc_rows_share_one_least_squares_fit():
     """A model's lsq row and its chain's start are one fit (one job), with the numbers of two separate jobs."""
-    from bayes_mr.fit_jobs import fit_job, lsq_mcmc_job, shares_lsq, units
+    from bayes_mr.selection.fit_jobs import fit_job, lsq_mcmc_job, shares_lsq, units
     from bayes_mr.inference.estimators import LeastSquares
-    from bayes_mr.inference.lsq import LSQSettings
+    from bayes_mr.inference.lsq.least_squares import LSQSettings
 
     rec = offset_device_record(1.6, fs=250.0)
     lsq, mcmc = LeastSquares(), Emcee(settings=SHORT, evidence="laplace")
@@ -216,7 +216,7 @@ def test_lsq_and_mcmc_rows_share_one_least_squares_fit():
 
 def test_a_grid_searches_least_squares_from_its_own_seed_and_shares_the_fit_with_the_chain():
     """compare(seed=3): the lsq rows' starts come from seed 3, as the chains' least squares do (one fit for both)."""
-    from bayes_mr.fit_jobs import units
+    from bayes_mr.selection.fit_jobs import units
 
     for seed in (0, 3):
         [(model, ests)] = units([("dahl", "lsq"), ("dahl", "mcmc")], {}, seed)

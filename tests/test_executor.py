@@ -14,11 +14,11 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import pytest
 
-from bayes_mr.cli import main
-from bayes_mr.comparison import compare
-from bayes_mr.diagnosis import diagnose
-from bayes_mr.executor import call_single_threaded, local_threads, open_executor, run_jobs, side_by_side
-from bayes_mr.results import _jsonable
+from bayes_mr.cli.commands import main
+from bayes_mr.selection.comparison import compare
+from bayes_mr.diagnosis.diagnose import diagnose
+from bayes_mr.execution.executor import call_single_threaded, local_threads, open_executor, run_jobs, side_by_side
+from bayes_mr.inference.results import _jsonable
 from records import offset_device_record
 
 MODELS = ["dahl", "dahl+force_offset"]
@@ -144,7 +144,7 @@ def test_diagnose_on_this_process_threads_gives_the_result_in_turn(record, monke
     same cause, scores and extended model as one after another (one numba thread: no pool)."""
     import numba
 
-    from bayes_mr.diagnosis import screen
+    from bayes_mr.diagnosis.diagnose import screen
 
     seen = _spy_threads(monkeypatch, screen, "screen_job")
     a = diagnose(record, "dahl", progress=False)
@@ -159,8 +159,8 @@ def test_diagnose_on_this_process_threads_gives_the_result_in_turn(record, monke
 
 
 def test_least_squares_starts_side_by_side_give_the_fit_in_turn(record, monkeypatch):
-    import bayes_mr.inference.lsq as lsq
-    from bayes_mr.likelihood import OutputError
+    import bayes_mr.inference.lsq.least_squares as lsq
+    from bayes_mr.likelihood.output_error import OutputError
 
     seen = _spy_threads(monkeypatch, lsq, "refine")
     lik = OutputError("dahl", record)

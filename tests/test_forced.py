@@ -11,14 +11,14 @@ import json
 import numpy as np
 import pytest
 
-from bayes_mr import results
-from bayes_mr.cli import main
+from bayes_mr.inference import results
+from bayes_mr.cli.commands import main
 from bayes_mr.data import RecordError, load
-from bayes_mr.identify import UKF, Emcee, Identify, LeastSquares, validate
-from bayes_mr.inference.mcmc import MCMCSettings
-from bayes_mr.likelihood import OutputError, record_scales
+from bayes_mr.inference.identify import UKF, Emcee, Identify, LeastSquares, validate
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.likelihood.output_error import OutputError, record_scales
 from bayes_mr.models import get_model
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 FS, DURATION = 500.0, 2.0
 TIME = np.arange(0.0, DURATION, 1.0 / FS)
@@ -164,7 +164,7 @@ def test_signed_log_coordinates_round_trip():
 
 
 def test_divergent_law_is_recorded_not_raised():
-    from bayes_mr.simulate import Inputs, simulate
+    from bayes_mr.simulation.simulate import Inputs, simulate
 
     m = get_model("bouc-wen")
     theta = m.theta("forced", {"beta1": 1.0, "gamma": -1e9, "n": 1.0, "m": 1.0})

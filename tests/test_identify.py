@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from records import offset_device_record, structure_record
 
-from bayes_mr import results
-from bayes_mr.identify import Emcee, Identify, LeastSquares, engine, predict, validate
+from bayes_mr.inference import results
+from bayes_mr.inference.identify import Emcee, Identify, LeastSquares, engine, predict, validate
 
 TRUTH = {"c": 800.0, "k": 300.0, "F_d": 200.0, "sigma": 3000.0, "f0": -60.0}
 

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from bayes_mr import input_grid
+from bayes_mr.simulation import input_grid
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 
 FS = 750.0
 BENCHMARK = {"c": 10.0, "k": 5e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0, "m": 2.0}
@@ -87,7 +87,7 @@ def test_auto_choice():
 
 
 def test_json_key_and_cli_flag(tmp_path):
-    from bayes_mr.cli import main
+    from bayes_mr.cli.commands import main
 
     path = tmp_path / "rec.nc"
     assert main(["simulate", "--model", "dahl", "--signal", "blwn", "--duration", "1.5", "--fs", "500",

@@ -5,7 +5,7 @@ import pytest
 
 from bayes_mr.models import get_model, kernel
 from bayes_mr.models.drivers import run_batch
-from bayes_mr.simulate import simulate
+from bayes_mr.simulation.simulate import simulate
 from records import device_inputs, structure_inputs
 from test_simulate import THESIS_FRAME, reference_simulation
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from bayes_mr.likelihood import OutputError
+from bayes_mr.likelihood.output_error import OutputError
 from records import masked_structure_record
 
 

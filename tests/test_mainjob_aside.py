@@ -1,4 +1,4 @@
-"""The main job's stages beside the posteriors (bayes_mr.mainjob_aside): the in-process results, whatever happens
+"""The main job's stages beside the posteriors (bayes_mr.run.aside): the in-process results, whatever happens
 to the child."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from bayes_mr.mainjob import QUICK, run
-from bayes_mr.mainjob_aside import Stage, start
+from bayes_mr.run.job import QUICK, run
+from bayes_mr.run.aside import Stage, start
 
 
 def _square(x, *, say):
@@ -86,7 +86,7 @@ def test_the_main_job_beside_the_posteriors_gives_the_in_process_numbers(tmp_pat
 
 def test_without_the_child_the_stages_are_planned_for_the_final_selection(tmp_path, monkeypatch):
     """When the posteriors change the first pass's choice, the diagnosis runs once, for the final selection."""
-    import bayes_mr.mainjob as mainjob
+    import bayes_mr.run.job as mainjob
 
     real_posteriors, real_diagnose, firsts, diagnosed = mainjob.with_posteriors, mainjob.diagnose_selected, [], []
 

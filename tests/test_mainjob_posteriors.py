@@ -1,14 +1,14 @@
-"""The main job's posteriors from one pool of seconds, the selected form's first (bayes_mr.mainjob_posteriors)."""
+"""The main job's posteriors from one pool of seconds, the selected form's first (bayes_mr.run.posteriors)."""
 
 from dataclasses import replace
 
 import pytest
 from records import offset_device_record
 
-from bayes_mr.inference.mcmc import MCMCSettings
-from bayes_mr.mainjob import FULL, QUICK, Budget
-from bayes_mr.mainjob_posteriors import least_squares_pass, posterior_order, run_posteriors
-from bayes_mr.warmup import compile_filter_aside, wait
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.run.plan import FULL, QUICK, Budget
+from bayes_mr.run.posteriors import least_squares_pass, posterior_order, run_posteriors
+from bayes_mr.run.warmup import compile_filter_aside, wait
 
 
 def test_the_selected_form_runs_first_then_the_evidence_decides():
@@ -32,7 +32,7 @@ def test_a_spent_pool_starts_nothing_and_says_who_spent_it(monkeypatch):
     def refit(*_):
         raise AssertionError("the posterior refitted least squares")
 
-    monkeypatch.setattr("bayes_mr.fit_jobs.fit_lsq", refit)
+    monkeypatch.setattr("bayes_mr.selection.fit_jobs.fit_lsq", refit)
     fits, skipped = run_posteriors(rec, None, ["dahl", "lugre"], budget, seed=0, fitted=fitted, say=lambda *_: None)
     assert fits == {}
     assert "more than the" in skipped["dahl"] and skipped["dahl"].endswith("not run")
@@ -43,9 +43,9 @@ def test_the_first_pass_and_the_posterior_are_compare_s_rows():
     """The first pass's ``lsq`` row and the posterior from its fit are the rows ``compare`` gives for ``lsq`` and
     ``mcmc`` of the same form and seed (one least-squares fit for both there too), without a pool each posterior
     on its own settings."""
-    from bayes_mr.comparison import compare
-    from bayes_mr.identify import Emcee, LeastSquares
-    from bayes_mr.inference.lsq import LSQSettings
+    from bayes_mr.selection.comparison import compare
+    from bayes_mr.inference.identify import Emcee, LeastSquares
+    from bayes_mr.inference.lsq.least_squares import LSQSettings
 
     rec = offset_device_record(1.6, fs=250.0)
     mcmc = MCMCSettings(max_steps=400, min_tau_multiple=20.0, rhat_max=1.05)
@@ -72,14 +72,14 @@ def test_the_budget_refuses_what_it_cannot_run():
 
 
 def test_the_cli_refuses_a_pool_that_is_not_positive(capsys):
-    from bayes_mr.cli import main
+    from bayes_mr.cli.commands import main
 
     assert main(["run", "--quick", "--mcmc-pool", "0", "--out", "unused", "--no-readme", "--quiet"]) == 2
     assert "mcmc_pool_s must be positive" in capsys.readouterr().err
 
 
 def test_a_failed_filter_warm_up_is_reported_not_raised():
-    """The child that compiles the UKF filter aside (bayes_mr.warmup) only saves time: when it fails, the job is
+    """The child that compiles the UKF filter aside (bayes_mr.run.warmup) only saves time: when it fails, the job is
     told why and goes on (its first UKF fit compiles the filter itself)."""
     said = []
     child = compile_filter_aside(offset_device_record(1.6, fs=250.0), "no-such-form", 1, (0.01,))

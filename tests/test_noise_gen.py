@@ -1,4 +1,4 @@
-"""Band-limited white noise (bayes_mr.synthetic_noise)."""
+"""Band-limited white noise (bayes_mr.numerics.synthetic_noise)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from bayes_mr.synthetic_noise import add_noise, band_limited_noise, zero_phase_lowpass_gain
+from bayes_mr.numerics.synthetic_noise import add_noise, band_limited_noise, zero_phase_lowpass_gain
 
 
 @pytest.mark.parametrize("band", [None, 25.0])

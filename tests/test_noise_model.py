@@ -6,7 +6,7 @@ from scipy.linalg import toeplitz
 from scipy.signal import lfilter
 from scipy.stats import multivariate_normal, norm
 
-from bayes_mr import noise_model as nm
+from bayes_mr.likelihood import noise_model as nm
 
 
 def _ar_autocovariance(a: np.ndarray, s2: float, n: int) -> np.ndarray:
@@ -72,8 +72,8 @@ def test_effective_samples_of_an_ar1_is_the_textbook_formula():
 
 
 def test_the_iid_likelihood_is_unchanged_and_ar_with_order_zero_equals_it(masked_record):
-    from bayes_mr.likelihood import OutputError
-    from bayes_mr.noise_model import ResidualModel
+    from bayes_mr.likelihood.output_error import OutputError
+    from bayes_mr.likelihood.noise_model import ResidualModel
 
     iid = OutputError("dahl", masked_record)
     ar0 = OutputError("dahl", masked_record, residual=ResidualModel("ar", (0, 0)))

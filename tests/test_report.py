@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bayes_mr.report.readme import bench_section, run_section
+from bayes_mr.run.readme import bench_section, run_section
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -17,8 +17,10 @@ def test_importing_and_drawing_leave_matplotlib_alone():
     code = """
 import matplotlib
 matplotlib.use("svg")
-import bayes_mr.cli, bayes_mr.mainjob, bayes_mr.bench, bayes_mr.diagnosis
-from bayes_mr.report import diagnose, figures, readme, run
+import bayes_mr.cli.commands, bayes_mr.run.job, bayes_mr.bench.benchmark, bayes_mr.diagnosis.diagnose
+from bayes_mr.report import diagnose, figures
+from bayes_mr.run import readme
+from bayes_mr.run import report as run
 import numpy as np, sys, tempfile, pathlib
 t = np.linspace(0, 1, 50)
 figures.save(figures.time_series(t, {"x": {"a": t}}), pathlib.Path(tempfile.mkdtemp()) / "f.png")
@@ -115,7 +117,7 @@ def test_study_section_copies_its_report_and_figures(tmp_path):
 def test_the_headline_says_which_posterior_did_not_converge_and_why():
     """Issue 16 item 3: each unconverged chain with its length in τ and its R-hat; forms without a posterior
     named, the selected one first."""
-    from bayes_mr.report.headline import _posterior_lines
+    from bayes_mr.run.headline import _posterior_lines
 
     rows = [{"engine": "mcmc", "model": "dahl", "n_steps": 3250, "tau_max": 24.0, "rhat_max": 1.008,
              "converged": True, "stopped": "converged"},
@@ -150,8 +152,8 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
 
 def test_an_unconverged_headline_names_the_shape_that_makes_the_chain_slow():
     """A chain the budget stopped says which coordinates spread over their prior and which lie on a ridge
-    (``geometry``, from :func:`bayes_mr.inference.geometry.chain_geometry`); a converged one says nothing more."""
-    from bayes_mr.report.headline import _posterior_lines
+    (``geometry``, from :func:`bayes_mr.inference.mcmc.geometry.chain_geometry`); a converged one says nothing more."""
+    from bayes_mr.run.headline import _posterior_lines
 
     geometry = {"slowest": [["k1", 9.2]], "spread_over_prior": {"k1": 0.973, "k0": 0.94},
                 "ridges": [["gamma", "n", 0.9965]]}

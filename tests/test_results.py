@@ -11,7 +11,7 @@ import pytest
 import xarray as xr
 from records import offset_device_record
 
-from bayes_mr import results
+from bayes_mr.inference import results
 from bayes_mr.inference.base import Posterior
 
 NAMES = ("c", "k", "F_d", "sigma", "f0")

@@ -10,19 +10,9 @@ import numpy as np
 import pytest
 
 from bayes_mr.data.ground_motions import (
-    STANDARD_GRAVITY,
-    GroundMotionFormatError,
-    load_ground_motion,
-    read_peer_at2,
-    read_two_column,
+    STANDARD_GRAVITY, GroundMotionFormatError, load_ground_motion, read_peer_at2, read_two_column,
 )
-from bayes_mr.signals import (
-    Signal,
-    integrate_acceleration,
-    make_signal,
-    signal_names,
-    thesis_signal,
-)
+from bayes_mr.signals import Signal, integrate_acceleration, make_signal, signal_names, thesis_signal
 
 G = STANDARD_GRAVITY
 ALL = list(signal_names())

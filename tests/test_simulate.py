@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bayes_mr.models import get_model
-from bayes_mr.simulate import delay, simulate
+from bayes_mr.simulation.simulate import delay, simulate
 from records import device_inputs, structure_inputs
 
 
@@ -262,7 +262,7 @@ def test_rest_start_and_output_at_first_sample():
 def test_the_compiled_cache_is_keyed_by_every_compiling_source(tmp_path):
     """An edit of a kernel file changes the cache directory (numba alone checks only a function's own
     file, so a driver that inlined an edited kernel would load stale machine code); other edits do not."""
-    from bayes_mr._jit import _source_key
+    from bayes_mr._compile.jit import _source_key
 
     (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return x\n")
     (tmp_path / "report.py").write_text("def g():\n    return 1\n")

@@ -19,11 +19,11 @@ import pytest
 import xarray as xr
 from records import device_inputs, structure_inputs
 
-from bayes_mr import _specialise as S
-from bayes_mr.inference.mcmc import MCMCSettings
+from bayes_mr._compile import specialise as S
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
 from bayes_mr.models import get_model
 from bayes_mr.models.drivers import run_batch, run_one
-from bayes_mr.simulate import Inputs
+from bayes_mr.simulation.simulate import Inputs
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -132,10 +132,10 @@ def test_auto_compiles_in_the_background_only_when_it_pays(monkeypatch, cache):
 
 
 def test_declared_work_starts_the_compiles_at_the_first_call(monkeypatch, cache):
-    """Work declared ahead (:func:`~bayes_mr._specialise.expect_work`, the main job's posteriors) counts as work
+    """Work declared ahead (:func:`~bayes_mr._compile.specialise.expect_work`, the main job's posteriors) counts as work
     asked: the next call for that layout, however small, starts the layout's compiles; another layout's does not."""
     from bayes_mr.models.kernel import mass
-    from bayes_mr.warmup import expect_posteriors
+    from bayes_mr.run.warmup import expect_posteriors
 
     monkeypatch.setenv(S.KERNELS_ENV, "auto")
     monkeypatch.setattr(S, "_work", {})
@@ -163,7 +163,7 @@ def test_processes_sharing_a_cache_start_one_compile_per_kernel(monkeypatch, cac
     """The first process to ask claims a kernel's compile; another process (here: the per-process memory cleared)
     starts no second child while the claim's child lives, and takes over a claim whose process has ended (killed
     before it released it) or that is older than ``CLAIM_STALE_S``. The child releases the claim when done."""
-    from bayes_mr import _compile_worker as W
+    from bayes_mr._compile import worker as W
     from bayes_mr.models.kernel import mass
 
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
@@ -268,8 +268,8 @@ def test_effects_and_kinds(cache, name, kind):
 
 @pytest.mark.slow
 def test_ukf_outputs_match(cache, monkeypatch):
-    from bayes_mr.inference import ukf
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference.ukf import filter as ukf
+    from bayes_mr.likelihood.output_error import OutputError
     from records import structure_record
 
     rec, _ = structure_record("dahl", {}, n=1500)
@@ -321,7 +321,7 @@ def test_specialised_choice_compiles_here_and_marks_it_ready_for_auto(monkeypatc
 
 
 def test_a_background_compile_runs_in_the_idle_class_where_the_os_has_one():
-    probe = ("import os\nfrom bayes_mr._compile_worker import idle_class\n"
+    probe = ("import os\nfrom bayes_mr._compile.worker import idle_class\n"
              "moved = idle_class()\nprint(moved, moved == (os.sched_getscheduler(0) == os.SCHED_IDLE))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
     assert out[1] == "True"

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from bayes_mr.cli import main, study_names
+from bayes_mr.cli.commands import main, study_names
 
 
 def run_study(name, tmp_path, *extra):

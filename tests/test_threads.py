@@ -1,4 +1,4 @@
-"""BLAS limited to one thread by the compute layer (bayes_mr._threads), with an override."""
+"""BLAS limited to one thread by the compute layer (bayes_mr._compile.threads), with an override."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import sys
 
 import pytest
 
-from bayes_mr._threads import ENV, blas_threads
+from bayes_mr._compile.threads import ENV, blas_threads
 
-_PROBE = ("import scipy.linalg\nimport bayes_mr.simulate\n"
+_PROBE = ("import scipy.linalg\nimport bayes_mr.simulation.simulate\n"
           "from threadpoolctl import threadpool_info\n"
           "print(sorted({i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas'}))")
 
@@ -31,7 +31,7 @@ def test_importing_the_compute_layer_limits_every_blas_library_to_one_thread():
 def test_the_override_is_applied_and_zero_leaves_blas_alone():
     assert _blas_threads_after_import("1") == [1]
     # "0": what the same libraries run with when bayes_mr is not imported at all
-    untouched = _blas_threads_after_import(None, _PROBE.replace("import bayes_mr.simulate\n", ""))
+    untouched = _blas_threads_after_import(None, _PROBE.replace("import bayes_mr.simulation.simulate\n", ""))
     assert _blas_threads_after_import("0") == untouched
 
 
@@ -52,7 +52,7 @@ def _omp_wait_after_import(value: str | None) -> str:
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     if value is not None:
         env["OMP_WAIT_POLICY"] = value
-    probe = "import os, bayes_mr.simulate\nprint(os.environ.get('OMP_WAIT_POLICY'))"
+    probe = "import os, bayes_mr.simulation.simulate\nprint(os.environ.get('OMP_WAIT_POLICY'))"
     return subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True,
                           check=True).stdout.strip()
 

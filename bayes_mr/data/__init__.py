@@ -8,14 +8,14 @@ record), :func:`apply_quality` (mask clipping, spikes, jumps, dropouts,
 end-of-test disturbances), :func:`noise_floor` and :func:`trim_excited`.
 """
 
-from .load import load
-from .nees import load_packaged
-from .noise_floor import noise_floor
-from .quality import QualityConfig, apply_quality
-from .read_csv import read_inputs
-from .schema import DEVICE, STRUCTURE, RecordError, make_record
-from .trim import trim_excited
-from .write import write_record
+from bayes_mr.data.load import load
+from bayes_mr.data.nees import load_packaged
+from bayes_mr.data.noise_floor import noise_floor
+from bayes_mr.data.quality import QualityConfig, apply_quality
+from bayes_mr.data.read_csv import read_inputs
+from bayes_mr.data.schema import DEVICE, STRUCTURE, RecordError, make_record
+from bayes_mr.data.trim import trim_excited
+from bayes_mr.data.write import write_record
 
 __all__ = [
     "DEVICE", "QualityConfig", "RecordError", "STRUCTURE", "apply_quality", "load", "load_packaged",

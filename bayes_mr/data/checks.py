@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .schema import OPTIONAL, REQUIRED, UNITS, Where, kind_of
+from bayes_mr.data.schema import OPTIONAL, REQUIRED, UNITS, Where, kind_of
 
 #: Time stamps within this fraction of a sample interval of a uniform grid are
 #: kept as they are (float round-off of ``i * dt``).

@@ -20,7 +20,7 @@ import numpy as np
 import xarray as xr
 from scipy import signal
 
-from .schema import UNITS
+from bayes_mr.data.schema import UNITS
 
 #: Fraction of the (detrended) signal power below the record's bandwidth.
 BANDWIDTH_POWER = 0.99

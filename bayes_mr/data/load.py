@@ -28,12 +28,12 @@ from collections.abc import Iterable, Mapping
 
 import xarray as xr
 
-from . import noise_floor as _noise
-from .derive import with_velocity
-from .quality import QualityConfig, apply_quality
-from .read import read_file
-from .schema import DEVICE
-from .trim import trim_excited
+from bayes_mr.data import noise_floor as _noise
+from bayes_mr.data.derive import with_velocity
+from bayes_mr.data.quality import QualityConfig, apply_quality
+from bayes_mr.data.read import read_file
+from bayes_mr.data.schema import DEVICE
+from bayes_mr.data.trim import trim_excited
 
 
 def load(

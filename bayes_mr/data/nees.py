@@ -23,10 +23,10 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .quality import QualityConfig, apply_quality
-from .read import read_file
-from .schema import Where
-from .write import publish
+from bayes_mr.data.quality import QualityConfig, apply_quality
+from bayes_mr.data.read import read_file
+from bayes_mr.data.schema import Where
+from bayes_mr.data.write import publish
 
 #: Significant digits written to the packaged CSV: the raw file has at most 8.
 DIGITS = 8

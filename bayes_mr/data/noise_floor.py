@@ -6,7 +6,7 @@ does this from a no-input record if one is given, else from a quiet segment of
 the record itself (found automatically), else from a differencing estimate.
 Both the record and the no-input record are record Datasets (read them with
 :func:`bayes_mr.data.load`). This module *estimates* noise; synthetic noise
-for simulations is *generated* by :mod:`bayes_mr.synthetic_noise`.
+for simulations is *generated* by :mod:`bayes_mr.numerics.synthetic_noise`.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import numpy as np
 import xarray as xr
 from scipy import ndimage
 
-from ..stats import robust_sd
-from .schema import STRUCTURE
+from bayes_mr.numerics.stats import robust_sd
+from bayes_mr.data.schema import STRUCTURE
 
 #: Window of the moving standard deviation that finds quiet and excited parts [s].
 WINDOW_S = 0.25

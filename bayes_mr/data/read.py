@@ -16,12 +16,12 @@ from pathlib import Path
 
 import xarray as xr
 
-from . import units as _units
-from .checks import CSV_SUFFIXES, NC_SUFFIXES, check_time, file_suffix
-from .read_arrays import ARRAY_SUFFIXES, parse_columns, read_arrays
-from .read_csv import read_csv
-from .read_netcdf import read_netcdf
-from .schema import DEVICE, Where, check_mass, kind_of, make_record
+from bayes_mr.data import units as _units
+from bayes_mr.data.checks import CSV_SUFFIXES, NC_SUFFIXES, check_time, file_suffix
+from bayes_mr.data.read_arrays import ARRAY_SUFFIXES, parse_columns, read_arrays
+from bayes_mr.data.read_csv import read_csv
+from bayes_mr.data.read_netcdf import read_netcdf
+from bayes_mr.data.schema import DEVICE, Where, check_mass, kind_of, make_record
 
 
 def read_file(

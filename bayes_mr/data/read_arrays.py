@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import units as _units
-from .checks import check_columns, check_overrides, one_line
-from .schema import MIN_SAMPLES, UNITS, Where
+from bayes_mr.data import units as _units
+from bayes_mr.data.checks import check_columns, check_overrides, one_line
+from bayes_mr.data.schema import MIN_SAMPLES, UNITS, Where
 
 ARRAY_SUFFIXES = (".mat", ".h5", ".hdf5")
 

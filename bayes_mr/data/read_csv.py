@@ -17,16 +17,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import units as _units
-from .checks import (
-    CSV_SUFFIXES,
-    check_columns,
-    check_overrides,
-    check_time,
-    file_suffix,
-    one_line,
-)
-from .schema import MIN_SAMPLES, OUTPUTS, Where, kind_of
+from bayes_mr.data import units as _units
+from bayes_mr.data.checks import CSV_SUFFIXES, check_columns, check_overrides, check_time, file_suffix, one_line
+from bayes_mr.data.schema import MIN_SAMPLES, OUTPUTS, Where, kind_of
 
 
 def read_csv(

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from . import units as _units
-from .checks import check_columns, check_overrides, one_line
-from .schema import MIN_SAMPLES, Where
+from bayes_mr.data import units as _units
+from bayes_mr.data.checks import check_columns, check_overrides, one_line
+from bayes_mr.data.schema import MIN_SAMPLES, Where
 
 #: Attributes a record gets again from :func:`bayes_mr.data.schema.make_record`, not from the file.
 _REBUILT = ("kind", "fs", "dt", "source", "masked")

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from .noise_floor import WINDOW_S, input_activity, input_channel
-from .schema import MIN_SAMPLES
+from bayes_mr.data.noise_floor import WINDOW_S, input_activity, input_channel
+from bayes_mr.data.schema import MIN_SAMPLES
 
 
 def trim_excited(

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from .schema import Where
+from bayes_mr.data.schema import Where
 
 #: Standard gravity [m/s²] (the ``g`` unit).
 G0 = 9.80665

@@ -33,8 +33,8 @@ import numpy as np
 import xarray as xr
 from scipy import signal
 
-from .derive import bandwidth, savgol_window
-from .schema import DEVICE, make_record
+from bayes_mr.data.derive import bandwidth, savgol_window
+from bayes_mr.data.schema import DEVICE, make_record
 
 #: The thesis's frame (§4.3, §5.3): mass [kg], stiffness [N/m], damping [N·s/m].
 THESIS_FRAME = {"mass": 27.0, "k": 25_000.0, "c": 100.0}

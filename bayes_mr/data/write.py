@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .checks import CSV_SUFFIXES, NC_SUFFIXES, check_columns, file_suffix, one_line
-from .schema import STRUCTURE, RecordError, Where, kind_of
+from bayes_mr.data.checks import CSV_SUFFIXES, NC_SUFFIXES, check_columns, file_suffix, one_line
+from bayes_mr.data.schema import STRUCTURE, RecordError, Where, kind_of
 
 
 def write_record(ds: xr.Dataset, path: str | os.PathLike) -> Path:

@@ -26,7 +26,7 @@ trained on A only, predict B?
    unexplained against the noise floor, :mod:`.unexplained`).
 
 Nothing here sees B before step 4, and the candidates, threshold and starts
-are the ones :func:`~bayes_mr.diagnosis.diagnose` uses on every record.
+are the ones :func:`~bayes_mr.diagnosis.diagnose.diagnose` uses on every record.
 """
 
 from __future__ import annotations
@@ -37,16 +37,16 @@ import time as _time
 import numpy as np
 import xarray as xr
 
-from ..likelihood import OutputError
-from ..models import EFFECTS, Model, get_model
-from ..progress import say as progress_say
-from ..scores import force_nrmse
-from .chain import ChainOutputError, through_chain
-from .fits import Fit, _finish, converge, laplace, predict
-from .residuals import residual_views
-from .screen import THRESHOLD
-from .search import ranked_select
-from .unexplained import unexplained, worst_ratio
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import EFFECTS, Model, get_model
+from bayes_mr.execution.progress import say as progress_say
+from bayes_mr.scores import force_nrmse
+from bayes_mr.diagnosis.measurement_chain import ChainOutputError, through_chain
+from bayes_mr.diagnosis.fits import Fit, _finish, converge, laplace, predict
+from bayes_mr.diagnosis.residuals import residual_views
+from bayes_mr.diagnosis.screen import THRESHOLD
+from bayes_mr.diagnosis.search import ranked_select
+from bayes_mr.diagnosis.unexplained import unexplained, worst_ratio
 
 #: Effects the extension tries: the physics of an MR damper the vocabulary holds (a sensor delay and a
 #: stiffness drift are faults of the test, not of the damper model; a library term is not named physics).

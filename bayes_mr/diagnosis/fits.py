@@ -1,7 +1,7 @@
 """Fits that diagnose needs: a form from scratch, a model warm-started from another.
 
-Both are output-error least squares on :class:`~bayes_mr.likelihood.OutputError`
-with the Laplace evidence of :mod:`bayes_mr.inference.lsq`; a :class:`Fit`
+Both are output-error least squares on :class:`~bayes_mr.likelihood.output_error.OutputError`
+with the Laplace evidence of :mod:`bayes_mr.inference.lsq.least_squares`; a :class:`Fit`
 keeps the likelihood, the optimum, the simulated channels and the record's
 MSE together so that residual views, scores and reports read one object.
 
@@ -25,12 +25,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import xarray as xr
 
-from ..inference.lsq import LSQResult, LSQSettings, fit_lsq, laplace
-from ..inference.refine import STALLED, Stall, refine
-from ..likelihood import OutputError
-from ..models import Model, get_model
-from ..scores import score
-from ..simulate import Inputs, simulate
+from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, fit_lsq, laplace
+from bayes_mr.inference.lsq.refine import STALLED, Stall, refine
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import Model, get_model
+from bayes_mr.scores import score
+from bayes_mr.simulation.simulate import Inputs, simulate
 
 #: Most residual evaluations of one warm-started refinement.
 MAX_NFEV = 60
@@ -184,7 +184,7 @@ def refit(lik: OutputError, starts: np.ndarray, sd: np.ndarray, *,
     max_nfev : int
         Most residual evaluations per refinement.
     stall : Stall, optional
-        Stop each refinement of a start on a crawl (:class:`~bayes_mr.inference.refine.Stall`; the re-weighting
+        Stop each refinement of a start on a crawl (:class:`~bayes_mr.inference.lsq.refine.Stall`; the re-weighting
         that follows runs without it): the fit is then a little short of the optimum, by about what the crawl
         would still gain.
 
@@ -306,7 +306,7 @@ def inference_data(fit: Fit, *, seed: int = 0):
     ``seed``) through the one results builder, so ``bayes-mr validate`` scores
     it like any fit.
     """
-    from ..inference.estimators import LeastSquares
-    from ..results import build
+    from bayes_mr.inference.estimators import LeastSquares
+    from bayes_mr.inference.results import build
 
     return build(fit.lik, LeastSquares().posterior(fit.lik, fit.result, seed=seed))

@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..inference.refine import Residuals
-from ..likelihood import OutputError
-from ..stats import hac_bandwidth
+from bayes_mr.inference.lsq.refine import Residuals
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.numerics.stats import hac_bandwidth
 
 
 def _lagged(a: np.ndarray, b: np.ndarray, lag: int, m: int) -> np.ndarray:

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..likelihood import OutputError
-from ..models import Model, terms
-from ..simulate import simulate
-from .residuals import varying_voltage
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import Model, terms
+from bayes_mr.simulation.simulate import simulate
+from bayes_mr.diagnosis.residuals import varying_voltage
 
 #: Most terms one proposal holds (and the kernel's slots allow).
 MAX_TERMS = 3

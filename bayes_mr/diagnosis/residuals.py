@@ -27,7 +27,7 @@ import numpy as np
 import xarray as xr
 from scipy import stats
 
-from ..stats import autocorrelation, integrated_time
+from bayes_mr.numerics.stats import autocorrelation, integrated_time
 
 #: Quantile bins of the binned views.
 N_BINS = 24
@@ -226,7 +226,7 @@ def explanatory_variables(record: xr.Dataset) -> dict[str, np.ndarray]:
     structure: smoothed derivative of the measured displacement), amplitude
     envelope [m], and voltage [V] when the record's voltage varies.
     """
-    from ..data.derive import smooth_velocity
+    from bayes_mr.data.derive import smooth_velocity
 
     dt = float(record.attrs["dt"])
     x = record["displacement"].values
@@ -248,7 +248,7 @@ def varying_voltage(record: xr.Dataset) -> bool:
 def measured_channels(record: xr.Dataset) -> tuple[str, ...]:
     """Channels with a measurement to compare: the likelihood's outputs, plus a
     structure test's damper force when recorded."""
-    from ..data.schema import outputs_of
+    from bayes_mr.data.schema import outputs_of
 
     out = list(outputs_of(record))
     if record.attrs["kind"] == "structure" and "force" in record:

@@ -8,7 +8,7 @@ the extension against the base, corrected for autocorrelated residuals.
 
 The score
 ---------
-The Laplace evidence of :mod:`bayes_mr.inference.lsq` treats residuals as
+The Laplace evidence of :mod:`bayes_mr.inference.lsq.least_squares` treats residuals as
 independent. Residuals of a dynamic model are not: the response to input
 (process) noise, and any model error, are smooth in time, so the
 log-likelihood gain Δℓ of an extra parameter is inflated — under the null
@@ -25,7 +25,7 @@ effect's d parameters E, both marginal over the base parameters. With
 
 where μ_i are the eigenvalues of D⁻¹ Σ_iid,EE D⁻¹, D = diag of the effect
 parameters' prior widths in the estimation coordinates φ (uniform prior on
-φ, :class:`~bayes_mr.likelihood.OutputError`). The second term is the
+φ, :class:`~bayes_mr.likelihood.output_error.OutputError`). The second term is the
 Occam factor of the effect's parameters (posterior over prior volume of
 each principal direction, at most 1: a direction the data do not
 determine costs nothing and gains nothing, instead of the unbounded
@@ -46,14 +46,14 @@ import numpy as np
 import xarray as xr
 from scipy.stats import qmc
 
-from ..executor import Outcome, run_jobs, share
-from ..inference.refine import Stall
-from ..likelihood import OutputError
-from ..models import EFFECTS, Effect, Model
-from ..models.effects import DEVICE_ONLY, ON_COMMAND
-from .fits import Fit, refit
-from .inflation import design_effect
-from .residuals import envelope, varying_voltage
+from bayes_mr.execution.executor import Outcome, run_jobs, share
+from bayes_mr.inference.lsq.refine import Stall
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import EFFECTS, Effect, Model
+from bayes_mr.models.effects import DEVICE_ONLY, ON_COMMAND
+from bayes_mr.diagnosis.fits import Fit, refit
+from bayes_mr.diagnosis.inflation import design_effect
+from bayes_mr.diagnosis.residuals import envelope, varying_voltage
 
 #: Decision threshold on the score (an approximate log Bayes factor).
 #:
@@ -232,7 +232,7 @@ def effect_ranges(model: Model, record: xr.Dataset, scales=None) -> dict[str, tu
     (:data:`OFF_END`) and the small-amplitude threshold kept where both
     regimes hold a share of the record (:func:`regime_range`).
     """
-    from ..likelihood import record_scales
+    from bayes_mr.likelihood.output_error import record_scales
 
     scales = scales or record_scales(record)
     kind = record.attrs["kind"]
@@ -344,7 +344,7 @@ MAX_DELAY_SAMPLES = 200
 
 
 def _shift(y: np.ndarray, k: int) -> np.ndarray:
-    """``y`` delayed by k whole samples, the first value held (as :func:`bayes_mr.simulate.delay`)."""
+    """``y`` delayed by k whole samples, the first value held (as :func:`bayes_mr.simulation.simulate.delay`)."""
     if k <= 0:
         return y
     return np.concatenate([np.full(k, y[0]), y[:-k]])
@@ -408,7 +408,7 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
            executor=None) -> list[Candidate]:
     """Every effect of ``effects`` as an extension of ``base``, ranked by score (best first).
 
-    With ``executor`` (:mod:`bayes_mr.executor`) the candidates are fitted as
+    With ``executor`` (:mod:`bayes_mr.execution.executor`) the candidates are fitted as
     parallel jobs; each candidate's fit depends only on (record, base,
     effect, seed), and the ranking is of the candidates in the order of
     ``effects``, so the result is the one of the loop in process.

@@ -17,15 +17,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 import xarray as xr
 
-from ..executor import local_threads
-from ..models import EFFECTS
-from .fits import Fit, global_refit, refit
-from .screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
+from bayes_mr.execution.executor import local_threads
+from bayes_mr.models import EFFECTS
+from bayes_mr.diagnosis.fits import Fit, global_refit, refit
+from bayes_mr.diagnosis.screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
 
 
 @dataclass(frozen=True)
 class Search:
-    """How :func:`~bayes_mr.diagnosis.diagnose` adds effects to the baseline.
+    """How :func:`~bayes_mr.diagnosis.diagnose.diagnose` adds effects to the baseline.
 
     Attributes
     ----------
@@ -56,7 +56,7 @@ class Search:
             executor=None) -> tuple[list[Candidate], list[list[Candidate]]]:
         """Effects added to ``base`` (in order) and the rounds of scores (the first against ``base``); the candidates
         of a round are fitted on ``executor``, by default side by side on this process's threads
-        (:func:`~bayes_mr.executor.local_threads`: the same result)."""
+        (:func:`~bayes_mr.execution.executor.local_threads`: the same result)."""
         with local_threads(executor) as ex:
             if self.route == "forward":
                 return forward_select(record, base, threshold=self.threshold, max_effects=self.max_effects,

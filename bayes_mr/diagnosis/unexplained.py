@@ -3,14 +3,14 @@
 Per measured channel:
 
 * ``ratio`` — residual RMS over the channel's noise floor, the measurement
-  noise SD the likelihood itself uses (:func:`bayes_mr.likelihood.channel_noise`:
+  noise SD the likelihood itself uses (:func:`bayes_mr.likelihood.output_error.channel_noise`:
   the record's ``noise_sd_<channel>``, else the estimated floor). About 1 for
   a model right to the noise; a residual twice the floor is model error with
   three times the noise's variance.
 * ``variance_share`` — share of the channel's variance the model leaves
   unexplained, Σ r² / Σ (y − ȳ)² (1 − R²).
 * whiteness — Ljung–Box p-value and the integrated autocorrelation time
-  τ [samples] of the residual (:mod:`bayes_mr.stats`): white noise has
+  τ [samples] of the residual (:mod:`bayes_mr.numerics.stats`): white noise has
   p ≫ 0.01 and τ ≈ 1; model error is smooth in time.
 * ``where`` — the same ratio (RMS over the floor) in quantile bins of
   velocity and displacement, in command states (on, off, and the
@@ -32,9 +32,9 @@ import numpy as np
 import xarray as xr
 from scipy import signal as sp_signal
 
-from ..data.schema import command_of, outputs_of
-from ..likelihood import channel_noise
-from .residuals import Views
+from bayes_mr.data.schema import command_of, outputs_of
+from bayes_mr.likelihood.output_error import channel_noise
+from bayes_mr.diagnosis.residuals import Views
 
 #: Largest worst-channel residual-to-noise ratio still called "at the noise floor".
 #:

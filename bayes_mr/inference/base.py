@@ -4,13 +4,13 @@ An estimator is a small frozen object with a ``name`` and
 
     fit(likelihood, *, seed, progress) -> Posterior
 
-where ``likelihood`` is the :class:`~bayes_mr.likelihood.OutputError` binding
+where ``likelihood`` is the :class:`~bayes_mr.likelihood.output_error.OutputError` binding
 of (model, record, noise model) that every engine shares. The
 :class:`Posterior` holds what only the engine knows — its draws, the point it
 stands behind, its evidence and diagnostics — and nothing that can be
 derived from the likelihood: scores, pointwise log-likelihood, predictive
 draws and the JSON summary are built from it by one function,
-:func:`bayes_mr.results.build`. Adding an engine touches ``inference/`` only.
+:func:`bayes_mr.inference.results.build`. Adding an engine touches ``inference/`` only.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 if TYPE_CHECKING:  # the likelihood is the layer below; imported for annotations only
-    from ..likelihood import OutputError
+    from bayes_mr.likelihood.output_error import OutputError
 
 
 @dataclass
@@ -58,7 +58,7 @@ class Posterior:
     params_sd_ddof : int
         Degrees of freedom of the reported SD (1 for a chain, 0 for exact draws).
     simulation : dict
-        Keyword arguments of :func:`bayes_mr.simulate.simulate` the engine
+        Keyword arguments of :func:`bayes_mr.simulation.simulate.simulate` the engine
         used (sub-step control), so scores replay its simulation.
     info : dict
         Engine-specific JSON keys added to the ``fit`` summary.

@@ -1,6 +1,6 @@
 """Honest parameter covariance under noise on the measured input (errors in variables), for every engine.
 
-The output-error likelihood (:class:`~bayes_mr.likelihood.OutputError`)
+The output-error likelihood (:class:`~bayes_mr.likelihood.output_error.OutputError`)
 compares the measured outputs with the model driven by the *recorded* input.
 When the input itself is measured with noise w (a structure's ground
 acceleration, a forced test's applied force, a device test's imposed motion),
@@ -23,7 +23,7 @@ with J the Jacobian of the standardised (under AR: prewhitened) residual and
 Ω estimated by Monte Carlo from :data:`N_DRAWS` replicas r_k = W(G w_k + v_k)/σ̂:
 the model at the estimate driven by the recorded input plus a fresh draw w_k
 of the input noise (its SD from the record, as the UKF's process noise reads
-it: :func:`~bayes_mr.likelihood.channel_noise`), minus the model on the recorded
+it: :func:`~bayes_mr.likelihood.output_error.channel_noise`), minus the model on the recorded
 input, plus white measurement noise v_k of the variance the residual has left
 over, passed through the same AR prewhitening W as the residual. This is the
 linearised parametric bootstrap of the estimator: no refits, K simulations.
@@ -46,9 +46,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..likelihood import OutputError, channel_noise
-from ..simulate import DRIVE, simulate
-from ..stats import hac_bandwidth
+from bayes_mr.likelihood.output_error import OutputError, channel_noise
+from bayes_mr.simulation.simulate import DRIVE, simulate
+from bayes_mr.numerics.stats import hac_bandwidth
 
 #: Monte Carlo replicas of the input-noise response (Ω's relative SD error ≈ √(2/K) per element).
 N_DRAWS = 200
@@ -80,7 +80,7 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
     """Responses of the model at φ to ``n`` fresh draws of the input noise, shape (n, N, C) [channel units].
 
     ŷ(φ; u + w_k) − ŷ(φ; u) on the record's sample grid, the simulation's
-    grid and sub-steps replayed (:meth:`~bayes_mr.inputs.Inputs.with_rows`:
+    grid and sub-steps replayed (:meth:`~bayes_mr.simulation.inputs.Inputs.with_rows`:
     noise widens a band-limited drive's bandwidth, which would otherwise pick
     a finer grid) so the difference is the input's effect alone. Zeros when
     the record's input has no noise.
@@ -137,7 +137,7 @@ def replica_middle(lik: OutputError, phi: np.ndarray, J: np.ndarray, sigma: np.n
     sd_v = np.sqrt(np.maximum(var_r - var_e, 0.0))
     e = e + rng.normal(size=e.shape) * sd_v
     if lik.residual.kind == "ar" and lik.residual.resolved:
-        from ..noise_model import apply_filter, whiten
+        from bayes_mr.likelihood.noise_model import apply_filter, whiten
 
         _, coefs = whiten(resid[None], v, lik.residual.orders)
         e = apply_filter(e, v, lik.residual.orders, [a[0] for a in coefs])
@@ -299,7 +299,7 @@ def truncate_to_box(phi: np.ndarray, lower: np.ndarray, upper: np.ndarray,
     """Adjusted draws (W, n, p) restricted to the prior's box, and the fraction that fell outside.
 
     The calibrated posterior is the adjusted likelihood times the prior; with
-    the uniform box prior of :meth:`~bayes_mr.likelihood.OutputError.log_prior`
+    the uniform box prior of :meth:`~bayes_mr.likelihood.output_error.OutputError.log_prior`
     that is the adjusted draws truncated to the box. A draw the map carried out
     of it (a direction the data barely constrain, whose calibrated variance
     exceeds the box) is replaced by one drawn at random from the draws inside,

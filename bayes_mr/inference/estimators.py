@@ -9,8 +9,8 @@
   priors, the run with the lowest validation MSE kept (:mod:`.ukf_training`,
   :mod:`.ukf_validation`).
 
-All three read the same :class:`~bayes_mr.likelihood.OutputError` and return
-a :class:`~bayes_mr.inference.base.Posterior`; :func:`bayes_mr.results.build`
+All three read the same :class:`~bayes_mr.likelihood.output_error.OutputError` and return
+a :class:`~bayes_mr.inference.base.Posterior`; :func:`bayes_mr.inference.results.build`
 turns any of them into the one InferenceData schema. A fourth engine is a
 class here with a ``name`` and a ``fit``, and an entry in :data:`ENGINES`.
 """
@@ -22,18 +22,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from ..executor import job_executor
-from ..likelihood import OutputError
-from .base import Posterior, laplace_draws
-from .lsq import LSQResult, LSQSettings, fit_lsq, laplace, peak_from
-from . import calibrate, ukf
-from .evidence_scale import calibration_info
-from .ukf import TAUS, UKFSettings
+from bayes_mr.execution.executor import job_executor
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.inference.base import Posterior, laplace_draws
+from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, fit_lsq, laplace, peak_from
+from bayes_mr.inference import calibrate
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.inference.lsq.evidence_scale import calibration_info
+from bayes_mr.inference.ukf.filter import TAUS, UKFSettings
 
 
 @dataclass(frozen=True)
 class LeastSquares:
-    """Output-error least squares with Laplace uncertainty (:mod:`bayes_mr.inference.lsq`).
+    """Output-error least squares with Laplace uncertainty (:mod:`bayes_mr.inference.lsq.least_squares`).
 
     Attributes
     ----------
@@ -79,23 +80,23 @@ class LeastSquares:
 
 @dataclass(frozen=True)
 class Emcee:
-    """emcee posterior started at the least-squares optimum (:mod:`bayes_mr.inference.mcmc`).
+    """emcee posterior started at the least-squares optimum (:mod:`bayes_mr.inference.mcmc.sampler`).
 
     Attributes
     ----------
     settings : MCMCSettings, optional
         Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``). With a wall-time
         budget (``max_seconds``) a posterior projected not to meet the rule in it is not started:
-        :class:`~bayes_mr.inference.budget.OverBudget` says why (:func:`~bayes_mr.inference.budget.check_budget`).
+        :class:`~bayes_mr.inference.mcmc.wall_time.OverBudget` says why (:func:`~bayes_mr.inference.mcmc.wall_time.check_budget`).
     evidence : {"ti", "laplace", "tmcmc"}
         ``"ti"``: thermodynamic integration over a temperature ladder, with
         stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
         cheap route; ``"tmcmc"`` (opt-in): transitional MCMC from the
-        posterior's reference q (:mod:`bayes_mr.inference.tmcmc`), Laplace beside it.
+        posterior's reference q (:mod:`bayes_mr.inference.evidence.tmcmc`), Laplace beside it.
     executor : object, optional
         Runs the evidence ladder's rungs (``concurrent.futures`` or a dask
         Client; same numbers). A fit that itself runs on a Dask worker sends
-        them to its cluster without it (:func:`bayes_mr.executor.job_executor`).
+        them to its cluster without it (:func:`bayes_mr.execution.executor.job_executor`).
     """
 
     settings: object | None = None
@@ -119,12 +120,12 @@ class Emcee:
     def fit_from(self, likelihood: OutputError, res: LSQResult, *, seed: int = 0,
                  progress: bool = True) -> Posterior:
         """The chain and its evidence routes from a least-squares fit ``res`` of ``likelihood`` already made
-        (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.fit_jobs.lsq_mcmc_job`)."""
-        from .evidence import evidence_routes, laplace_evidence, tmcmc_evidence
-        from .budget import check_budget
-        from .mcmc import MCMCSettings, fit_mcmc, start_from_lsq
-        from .mcmc_posterior import mcmc_posterior
-        from .tmcmc import TMCMCSettings, run_tmcmc
+        (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.selection.fit_jobs.lsq_mcmc_job`)."""
+        from bayes_mr.inference.evidence.routes import evidence_routes, laplace_evidence, tmcmc_evidence
+        from bayes_mr.inference.mcmc.wall_time import check_budget
+        from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, start_from_lsq
+        from bayes_mr.inference.mcmc_posterior import mcmc_posterior
+        from bayes_mr.inference.evidence.tmcmc import TMCMCSettings, run_tmcmc
 
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
         if settings.max_seconds is not None:  # a chain that cannot converge in its budget is not started
@@ -145,7 +146,7 @@ class Emcee:
 
 @dataclass(frozen=True)
 class UKF:
-    """The thesis's augmented-state UKF trained from LHS × τ priors (:mod:`bayes_mr.inference.ukf_training`).
+    """The thesis's augmented-state UKF trained from LHS × τ priors (:mod:`bayes_mr.inference.ukf.training`).
 
     Attributes
     ----------
@@ -217,8 +218,8 @@ class UKF:
         ValueError
             No run could be trained and validated (every prior diverged).
         """
-        from .ukf_training import train
-        from .ukf_validation import best_run, validate_runs
+        from bayes_mr.inference.ukf.training import train
+        from bayes_mr.inference.ukf.validation import best_run, validate_runs
 
         training = train(likelihood, n_lhs=self.n_lhs, taus=self.taus, settings=self.settings, seed=seed,
                          executor=self.executor, chunk_size=self.chunk_size, progress=progress)

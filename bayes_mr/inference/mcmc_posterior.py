@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from .base import Posterior, even_indices
-from .calibrate import adjust_draws, describe, loewner_max, truncate_to_box
-from .checkpoint import seed_of
-from .evidence import Evidence, select_route
-from .evidence_scale import calibration_info
-from .geometry import chain_geometry
-from .mcmc import MCMCResult
+from bayes_mr.inference.base import Posterior, even_indices
+from bayes_mr.inference.calibrate import adjust_draws, describe, loewner_max, truncate_to_box
+from bayes_mr.inference.mcmc.checkpoint import seed_of
+from bayes_mr.inference.evidence.routes import Evidence, select_route
+from bayes_mr.inference.lsq.evidence_scale import calibration_info
+from bayes_mr.inference.mcmc.geometry import chain_geometry
+from bayes_mr.inference.mcmc.sampler import MCMCResult
 
 
 def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_draws: int = 200) -> Posterior:
@@ -27,7 +27,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         The least-squares fit the walkers started from (reported beside).
     evidence : Evidence or dict of str → Evidence, optional
         Evidence routes; with a dict the selecting one is
-        :func:`bayes_mr.inference.evidence.select_route` of it and the others
+        :func:`bayes_mr.inference.evidence.routes.select_route` of it and the others
         are reported beside it (``evidence_routes`` and the ``evidence`` group).
     n_ll_draws : int
         Pointwise log-likelihood on at most this many draws (all walkers ×
@@ -43,7 +43,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         truncated to the prior's box (:func:`~bayes_mr.inference.calibrate.truncate_to_box`; the fraction
         outside is ``uncertainty.draws_outside_prior``); the point is the maximum-posterior step after burn-in;
         ``sample_stats`` attributes ``rhat``, ``ess``, ``tau`` per coordinate; ``info["geometry"]`` what makes the
-        chain slow (:func:`~bayes_mr.inference.geometry.chain_geometry` of the chain after burn-in).
+        chain slow (:func:`~bayes_mr.inference.mcmc.geometry.chain_geometry` of the chain after burn-in).
     """
     p = lik.n_params
     coords = lik.par.coords

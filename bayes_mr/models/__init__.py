@@ -1,28 +1,14 @@
 """Model forms, effects and their composition (see ``docs/CONTRACT.md``, Models/Effects)."""
 
-from .catalog import get_model
-from .effects import (
-    ASYMMETRY,
-    COMMAND_SATURATION,
-    CUBIC_STIFFNESS,
-    EFFECTS,
-    FIELD_DECAY,
-    FIELD_DYNAMICS,
-    FORCE_OFFSET,
-    INERTIA,
-    LOW_VELOCITY_ROLLOFF,
-    NONE,
-    SENSOR_DELAY,
-    SHEAR_THINNING,
-    SMALL_AMPLITUDE_REGIME,
-    STIFFNESS_DRIFT,
-    STRIBECK_FRICTION,
-    VOLTAGE_DEPENDENCE,
-    Effect,
+from bayes_mr.models.registry import get_model
+from bayes_mr.models.effects import (
+    ASYMMETRY, COMMAND_SATURATION, CUBIC_STIFFNESS, EFFECTS, FIELD_DECAY, FIELD_DYNAMICS, FORCE_OFFSET, INERTIA,
+    LOW_VELOCITY_ROLLOFF, NONE, SENSOR_DELAY, SHEAR_THINNING, SMALL_AMPLITUDE_REGIME, STIFFNESS_DRIFT,
+    STRIBECK_FRICTION, VOLTAGE_DEPENDENCE, Effect,
 )
-from .forms import BOUC_WEN, DAHL, FORMS, LUGRE, NORMALIZED_BOUC_WEN, SPENCER
-from .model import KINDS, Form, Model
-from .params import Coordinates, ParamSpec, Scales
+from bayes_mr.models.forms import BOUC_WEN, DAHL, FORMS, LUGRE, NORMALIZED_BOUC_WEN, SPENCER
+from bayes_mr.models.model import KINDS, Form, Model
+from bayes_mr.models.params import Coordinates, ParamSpec, Scales
 
 __all__ = [
     "ASYMMETRY", "BOUC_WEN", "COMMAND_SATURATION", "CUBIC_STIFFNESS", "Coordinates", "DAHL", "EFFECTS", "Effect",

@@ -3,7 +3,7 @@
 They allocate their buffers once and call the per-sub-step functions of
 :mod:`bayes_mr.models.kernel` (:func:`~bayes_mr.models.kernel.deriv`,
 :func:`~bayes_mr.models.kernel.rate`, :func:`~bayes_mr.models.integrate.advance`)
-over every sample of a record; :func:`bayes_mr.simulate.simulate` is their
+over every sample of a record; :func:`bayes_mr.simulation.simulate.simulate` is their
 Python face.
 """
 
@@ -14,9 +14,9 @@ import math
 import numpy as np
 from numba import prange
 
-from .._jit import driver, hot
-from .integrate import DECIDE, RK4, ROS2, advance, substeps, work_shape
-from .kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, rate
+from bayes_mr._compile.jit import driver, hot
+from bayes_mr.models.integrate import DECIDE, RK4, ROS2, advance, substeps, work_shape
+from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, rate
 
 
 @hot(inline="always")
@@ -79,7 +79,7 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
         Structure and forced: displacement, velocity, absolute acceleration, damper force.
         Device: force (total), damper force. Written at every ``every``-th
         input row (a band-limited input upsampled by ``every``, see
-        :mod:`bayes_mr.input_grid`).
+        :mod:`bayes_mr.simulation.input_grid`).
     schedule : int64 ndarray, shape (N-1,)
         Sub-steps per interval: written when ``use_schedule`` is False, read
         when True (so perturbed parameter sets integrate on the same grid).
@@ -90,7 +90,7 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
         Input row where the state became non-finite, or -1.
     """
     # the state and k1 as two more rows of advance()'s scratch, one allocation: where _integrate is inlined here
-    # with the layout constant (bayes_mr._specialise) every row sits at a constant offset from one pointer, so
+    # with the layout constant (bayes_mr._compile.specialise) every row sits at a constant offset from one pointer, so
     # the compiler can prove them apart and keep RK4's stages in registers between right-hand sides instead of
     # storing and reloading each (three allocations are three pointers it must assume may overlap). Measured,
     # specialised structure step: dahl 31.8 -> 25.7 ns, lugre 41 -> 35; device tests at the packaged damper's

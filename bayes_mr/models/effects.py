@@ -45,7 +45,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .params import ParamSpec
+from bayes_mr.models.params import ParamSpec
 
 
 @dataclass(frozen=True)
@@ -199,7 +199,7 @@ STRIBECK_FRICTION = Effect(
 # The moving piston, rod and the fluid it accelerates through the orifice add m_e·ẍ to the force a
 # load cell measures on a device test (Kwok et al. 2006 and Wang & Liao 2011 discuss it as the
 # inertial error of quasi-static damper models at high frequency). ẍ is the Savitzky–Golay derivative
-# of the imposed velocity (bayes_mr.simulate.Inputs.acceleration).
+# of the imposed velocity (bayes_mr.simulation.simulate.Inputs.acceleration).
 INERTIA = Effect(
     "inertia", "piston and fluid inertia m_e·ẍ in the force of a device test",
     (ParamSpec("m_e", "kg", "effective moving mass (piston, rod, accelerated fluid)", 1.0, (1, 1, -2, 0),

@@ -39,9 +39,9 @@ never a crash.
 
 from __future__ import annotations
 
-from . import kernel
-from .model import Form
-from .params import F_, F_V, F_X, ONE, PER_X, PER_X2, ParamSpec, Ratio
+from bayes_mr.models import kernel
+from bayes_mr.models.model import Form
+from bayes_mr.models.params import F_, F_V, F_X, ONE, PER_X, PER_X2, ParamSpec, Ratio
 
 C = ParamSpec("c", "N·s/m", "viscous damping (frame + damper)", 100.0, F_V, (1e-3, 2.0))
 K = ParamSpec("k", "N/m", "stiffness (frame + damper)", 2.0e4, F_X, (1e-4, 3.0))

@@ -42,19 +42,21 @@ and cut the cost of the packaged damper's least-squares optima 2.5–5×. ``spen
 
 Each integrator evaluates the right-hand side from one call site, and ROS2 is a function of its own
 (not inlined into :func:`advance`), so a kernel that inlines :func:`~bayes_mr.models.kernel.deriv`
-(:mod:`bayes_mr._specialise`) inlines it once in each. The method an interval took is returned, and
+(:mod:`bayes_mr._compile.specialise`) inlines it once in each. The method an interval took is returned, and
 the drivers store it in the schedule (minus the number of ROS2 steps), so a replayed schedule (finite
-differences on one grid, :mod:`bayes_mr.simulate`) replays the method.
+differences on one grid, :mod:`bayes_mr.simulation.simulate`) replays the method.
 """
 
 from __future__ import annotations
 
 import math
 
-from .._jit import hot
-from .kernel import DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv, deriv_pow
-from .kernel_effects import _coil_step
-from .power import point_powers
+from bayes_mr._compile.jit import hot
+from bayes_mr.models.kernel import (
+    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv, deriv_pow,
+)
+from bayes_mr.models.kernel_effects import _coil_step
+from bayes_mr.models.power import point_powers
 
 #: γ of ROS2 (Verwer et al. 1999): 1 + 1/√2, the root that makes the method L-stable.
 GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
@@ -361,7 +363,7 @@ def advance_points(lay, cst, TH, t, h, a0, a1, X, K1, n_pts, n_sub, work, stages
     error scale in ``work`` met in the same order), but RK4's stage k is evaluated for every point before stage
     k + 1 of any: the points' right-hand sides are independent, so the processor overlaps their evaluations —
     a |z|ⁿ of one point need not finish before the next point's starts, as it must within one point's chain of
-    stages. The sigma points of the UKF (:mod:`bayes_mr.inference.ukf_kernel`) are such a set.
+    stages. The sigma points of the UKF (:mod:`bayes_mr.inference.ukf.kernel`) are such a set.
 
     The powers |z|ⁿ of a stage's points (the Bouc–Wen family's costliest operation) are computed together first
     (:func:`point_powers`, vectorised) and handed to :func:`~bayes_mr.models.kernel.deriv_pow`: they differ

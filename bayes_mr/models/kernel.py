@@ -24,10 +24,12 @@ from __future__ import annotations
 
 import math
 
-from .._jit import hot
-from .kernel_effects import (K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _fluid_friction,
-                             _fluid_slope, _lag_bound, _lag_rate, _saturate, _sgn)
-from .term_kernel import TERM_LAW, term_basis
+from bayes_mr._compile.jit import hot
+from bayes_mr.models.kernel_effects import (
+    K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _fluid_friction, _fluid_slope, _lag_bound, _lag_rate,
+    _saturate, _sgn,
+)
+from bayes_mr.models.term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
 NBW, DAHL, LUGRE, BW, SPENCER = 0, 1, 2, 3, 4

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from .._jit import hot
+from bayes_mr._compile.jit import hot
 
 # --- layout slots (int64 array; see kernel.L_*) ---------------------------------
 L_CSAT = 20  # command_saturation: u_s

@@ -3,7 +3,7 @@
 :class:`Form` (a damper law) and :class:`Model` (a form with effects) live
 together here because ``Form + Effect`` builds a ``Model``; the five forms
 themselves are in :mod:`bayes_mr.models.forms`, the effects in
-:mod:`bayes_mr.models.effects`, and :func:`bayes_mr.models.catalog.get_model`
+:mod:`bayes_mr.models.effects`, and :func:`bayes_mr.models.registry.get_model`
 parses a model name. Nothing here imports those catalogues, so the layers
 stay acyclic: params, kernel → effects → model → forms → catalog.
 
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import integrate, kernel, term_kernel
-from .effects import DEVICE_ONLY, ON_COMMAND, Effect
-from .params import F_V, F_X, Coordinates, ParamSpec, Ratio, Scales
+from bayes_mr.models import integrate, kernel, term_kernel
+from bayes_mr.models.effects import DEVICE_ONLY, ON_COMMAND, Effect
+from bayes_mr.models.params import F_V, F_X, Coordinates, ParamSpec, Ratio, Scales
 
 #: The kinds of test a model is bound to: a storey on a shake table, the damper alone, or a
 #: mass driven by a measured force (``m ẍ + f_r = p``).

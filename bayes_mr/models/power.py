@@ -34,8 +34,8 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from .._jit import hot
-from .kernel import power_slot
+from bayes_mr._compile.jit import hot
+from bayes_mr.models.kernel import power_slot
 
 
 @intrinsic

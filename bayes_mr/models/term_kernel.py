@@ -8,7 +8,7 @@ damper force or to the hysteretic-state rate.
 
 from __future__ import annotations
 
-from .._jit import hot
+from bayes_mr._compile.jit import hot
 
 # --- library-term codes: code = f1 + 16·f2 + 256·f3 + 4096·target ------------------
 # factor codes (0 = absent, i.e. 1): the states and inputs the basis multiplies

@@ -31,9 +31,9 @@ over the basis's scale).
 
 from __future__ import annotations
 
-from . import term_kernel
-from .effects import Effect
-from .params import ParamSpec
+from bayes_mr.models import term_kernel
+from bayes_mr.models.effects import Effect
+from bayes_mr.models.params import ParamSpec
 
 #: Factor name → (kernel code, short token of the parameter name, base quantity).
 FACTORS = {

@@ -1,18 +1,12 @@
-"""Reporting: Markdown, figures and README sections, one module per concern.
+"""How results look: Markdown tables, figures and the diagnosis's report.
 
-A layer above the library: these modules read what :mod:`bayes_mr.diagnosis`,
-:mod:`bayes_mr.comparison` and :mod:`bayes_mr.results` computed and never
-compute a result themselves. Only the top level (the CLI, the main job, the
-benchmark, the studies and ``scripts/``) imports them — and
-``diagnose(out_dir=...)``, which writes its report through
-:mod:`.diagnose` on request, lazily.
+The package imports nothing else of bayes_mr: it formats what the layers above computed and never
+computes a result, so any layer may draw with it. Figures use matplotlib's object API on an Agg
+canvas, so importing the package changes no global matplotlib state.
 
-* :mod:`.markdown` — number formatting and Markdown tables.
-* :mod:`.figures` — the figure helpers every figure uses (object API on an
-  Agg canvas: importing the package changes no global matplotlib state) and
-  the thesis's plots.
+* :mod:`.markdown` — number formatting and Markdown tables;
+* :mod:`.figures` — the helpers every figure uses, and the thesis's plots;
 * :mod:`.diagnose` — the figures and ``diagnose.md`` of a diagnosis.
-* :mod:`.run` — the figures, headline and ``report.md`` of the main job.
-* :mod:`.readme` — the README's run and bench sections, as text, from the
-  JSON those commands wrote (``scripts/update_readme.py`` writes them).
+
+The main job's report is :mod:`bayes_mr.run.report`.
 """

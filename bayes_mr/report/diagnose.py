@@ -1,9 +1,9 @@
-"""Figures and the Markdown report of a diagnosis (:func:`bayes_mr.diagnosis.diagnose`).
+"""Figures and the Markdown report of a diagnosis (:func:`bayes_mr.diagnosis.diagnose.diagnose`).
 
 Everything drawn here was computed before (:mod:`bayes_mr.diagnosis.residuals`,
 :mod:`bayes_mr.diagnosis.screen`); figures are deterministic for a given
 diagnosis and drawn with the object API of :mod:`.figures` (no pyplot, no
-global backend). This module imports nothing of :mod:`bayes_mr.diagnosis` at
+global backend). This module imports nothing of :mod:`bayes_mr.diagnosis.diagnose` at
 run time (the fits and residual views it draws are passed in), so the lazy
 call from ``diagnose(out_dir=...)`` makes no import cycle.
 """
@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import xarray as xr
 
-from .figures import save, subplots
-from .markdown import fmt
+from bayes_mr.report.figures import save, subplots
+from bayes_mr.report.markdown import fmt
 
 if TYPE_CHECKING:  # annotations only
-    from ..diagnosis.fits import Fit
-    from ..diagnosis.residuals import Views
+    from bayes_mr.diagnosis.fits import Fit
+    from bayes_mr.diagnosis.residuals import Views
 
 #: Most points drawn per line (long records are thinned evenly).
 MAX_POINTS = 20000

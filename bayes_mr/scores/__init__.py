@@ -6,7 +6,7 @@
   noise SDs and derived velocity), and :func:`score` scores one prediction.
 """
 
-from .metrics import force_errors, force_nrmse, mse
-from .scorer import Scorer, score
+from bayes_mr.scores.metrics import force_errors, force_nrmse, mse
+from bayes_mr.scores.scorer import Scorer, score
 
 __all__ = ["Scorer", "force_errors", "force_nrmse", "mse", "score"]

@@ -25,7 +25,7 @@ once and scores many predictions — the 100 trained runs of a validation):
 
 Every score is over the record's ``valid`` samples only; N is their number.
 σ are the record's measurement-noise SDs (``noise_sd_<channel>`` attributes,
-else the noise floor, :func:`bayes_mr.likelihood.channel_noise`).
+else the noise floor, :func:`bayes_mr.likelihood.output_error.channel_noise`).
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..data.derive import smooth_velocity
-from ..data.schema import outputs_of
-from ..likelihood import channel_noise
-from .metrics import force_errors, force_nrmse, mse
+from bayes_mr.data.derive import smooth_velocity
+from bayes_mr.data.schema import outputs_of
+from bayes_mr.likelihood.output_error import channel_noise
+from bayes_mr.scores.metrics import force_errors, force_nrmse, mse
 
 
 def _bridged(x: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -5,10 +5,10 @@
   :class:`Trial` objects, and :func:`best_trial` across models (Fig. 3.16).
 
 The UKF training itself and the scoring of its runs live in
-:mod:`bayes_mr.inference.ukf_training` and
-:mod:`bayes_mr.inference.ukf_validation`; the scores in :mod:`bayes_mr.scores`.
+:mod:`bayes_mr.inference.ukf.training` and
+:mod:`bayes_mr.inference.ukf.validation`; the scores in :mod:`bayes_mr.scores`.
 """
 
-from .validation import Trial, best_trial, method1, method2, method3
+from bayes_mr.selection.thesis_methods import Trial, best_trial, method1, method2, method3
 
 __all__ = ["Trial", "best_trial", "method1", "method2", "method3"]

@@ -34,9 +34,9 @@ Modules
 Units: SI throughout (``amplitude`` in metres, frequencies in Hz).
 """
 
-from .catalog import THESIS_FS, make_signal, signal_names, thesis_signal
-from .earthquake import BASELINES
-from .signal import Signal, integrate_acceleration
+from bayes_mr.signals.catalog import THESIS_FS, make_signal, signal_names, thesis_signal
+from bayes_mr.signals.earthquake import BASELINES
+from bayes_mr.signals.signal import Signal, integrate_acceleration
 
 __all__ = [
     "BASELINES", "THESIS_FS", "Signal", "integrate_acceleration", "make_signal", "signal_names", "thesis_signal",

@@ -14,10 +14,10 @@ from functools import partial
 
 import numpy as np
 
-from ..synthetic_noise import as_generator, as_seed_sequence
-from .earthquake import BASELINES, earthquake
-from .signal import Signal
-from .thesis import amp_sweep, blwn, freq_sweep_up, freq_sweep_up_down, step
+from bayes_mr.numerics.synthetic_noise import as_generator, as_seed_sequence
+from bayes_mr.signals.earthquake import BASELINES, earthquake
+from bayes_mr.signals.signal import Signal
+from bayes_mr.signals.thesis import amp_sweep, blwn, freq_sweep_up, freq_sweep_up_down, step
 
 #: Sampling rate of every Table 5.1 signal [Hz].
 THESIS_FS = 4096.0

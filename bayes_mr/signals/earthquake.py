@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.ground_motions import load_ground_motion
-from .signal import integrate_acceleration
+from bayes_mr.data.ground_motions import load_ground_motion
+from bayes_mr.signals.signal import integrate_acceleration
 
 #: Baseline corrections applied to earthquake records.
 BASELINES = ("cubic", "none")

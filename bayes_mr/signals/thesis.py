@@ -33,7 +33,7 @@ Reading of Table 5.1 (where it is ambiguous or inconsistent)
   a sampled zero acceleration would not move). Between the corners the
   displacement is the exact ramp / plateau.
 * BLWN: as Table 5.1 writes it — draw ``r ~ N(0, A²)`` per sample, low-pass
-  it at F with the zero-phase Butterworth of :mod:`bayes_mr.synthetic_noise` (gain 1
+  it at F with the zero-phase Butterworth of :mod:`bayes_mr.numerics.synthetic_noise` (gain 1
   in the pass band), and taper the first and last second (quintic, so x, v, a
   start and end at 0). The motion's RMS is then about ``A · sqrt(1.8 F/fs)``
   (0.29 mm for A = 3 mm, F = 20 Hz, 4096 Hz; the actual value is in
@@ -45,8 +45,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..synthetic_noise import zero_phase_lowpass_gain
-from .signal import integrate_acceleration
+from bayes_mr.numerics.synthetic_noise import zero_phase_lowpass_gain
+from bayes_mr.signals.signal import integrate_acceleration
 
 # Taper of the BLWN ends [s] (capped at a quarter of the record): the table
 # must start and end at rest; 1 s leaves 95 % of a 40 s record untouched.

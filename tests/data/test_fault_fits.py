@@ -22,22 +22,16 @@ import json
 import numpy as np
 import pytest
 
-from bayes_mr import results
-from bayes_mr.cli import main
+from bayes_mr.inference import results
+from bayes_mr.cli.commands import main
 from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import decimate_record
-from bayes_mr.data.faults import (
-    clean_record,
-    inject_clipping,
-    inject_dropout,
-    inject_jump_and_ring,
-    inject_spikes,
-)
+from faults import clean_record, inject_clipping, inject_dropout, inject_jump_and_ring, inject_spikes
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import apply_quality, report_of
-from bayes_mr.identify import predict
-from bayes_mr.inference.lsq import LSQSettings, fit_lsq
-from bayes_mr.likelihood import OutputError, channel_noise
+from bayes_mr.inference.identify import predict
+from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+from bayes_mr.likelihood.output_error import OutputError, channel_noise
 from bayes_mr.scores import force_nrmse
 
 #: Least squares, a little cheaper than the default (both fits of a pair use the same).

@@ -13,7 +13,7 @@ import xarray as xr
 
 from bayes_mr.data import load, write_record
 from bayes_mr.data.derive import bandwidth, decimate_record, resample, smooth_velocity
-from bayes_mr.data.faults import clean_record, inject_spikes
+from faults import clean_record, inject_spikes
 from bayes_mr.data.nees import convert_nees, load_packaged
 from bayes_mr.data.nees import main as nees_main
 from bayes_mr.data.quality import apply_quality

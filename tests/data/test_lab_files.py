@@ -21,7 +21,7 @@ import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bayes_mr.cli import main
+from bayes_mr.cli.commands import main
 from bayes_mr.data import RecordError, load
 from bayes_mr.data.quality import report_of
 from bayes_mr.data.read_arrays import parse_columns
@@ -153,7 +153,7 @@ def test_cli_columns_option(tmp_path, capsys):
                  "--json", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "no variable 'Z'" in err and not out.exists()
-    from bayes_mr.cli import _read, build_parser
+    from bayes_mr.cli.commands import _read, build_parser
 
     args = build_parser().parse_args(["fit", str(p), "--model", "dahl", "--columns", "time=t,displacement=D",
                                       "--columns", "velocity=V,voltage=U,force=F", "--units", "displacement=mm"])

@@ -9,13 +9,7 @@ import pytest
 from scipy import ndimage
 
 from bayes_mr.data import load, write_record
-from bayes_mr.data.faults import (
-    clean_record,
-    inject_clipping,
-    inject_dropout,
-    inject_jump_and_ring,
-    inject_spikes,
-)
+from faults import clean_record, inject_clipping, inject_dropout, inject_jump_and_ring, inject_spikes
 from bayes_mr.data.nees import load_packaged
 from bayes_mr.data.quality import QualityConfig, apply_quality, assess, report_of
 

@@ -14,14 +14,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_mr.data.faults import inject_dropout, inject_spikes
+from faults import inject_dropout, inject_spikes
 from bayes_mr.data.quality import apply_quality, assess, report_of
 from bayes_mr.data.quality.consistency import mismatch
-from bayes_mr.inference.lsq import LSQSettings, fit_lsq
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import Signal, make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 FS = 4096.0  # Table 5.1
 MASS = 50.0  # kg, the thesis's numerical frame

@@ -6,7 +6,7 @@ import pytest
 from bayes_mr.data import load_packaged
 from bayes_mr.data.virtual_table import implied_damper_force, virtual_shake_table
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, simulate
+from bayes_mr.simulation.simulate import Inputs, simulate
 from records import signal_record
 
 

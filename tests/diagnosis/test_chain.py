@@ -3,11 +3,11 @@
 import numpy as np
 
 from bayes_mr.data.derive import decimate_record
-from bayes_mr.diagnosis.chain import ChainOutputError, through_chain
-from bayes_mr.likelihood import OutputError
+from bayes_mr.diagnosis.measurement_chain import ChainOutputError, through_chain
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 
 
 def _record(fs: float = 2000.0, seed: int = 5):

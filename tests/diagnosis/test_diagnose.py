@@ -15,13 +15,13 @@ import math
 import numpy as np
 import pytest
 
-from bayes_mr.diagnosis import THRESHOLD, Search, diagnose
+from bayes_mr.diagnosis.diagnose import THRESHOLD, Search, diagnose
 from bayes_mr.diagnosis.inflation import design_effect_of
 from bayes_mr.diagnosis.residuals import envelope, lag_of, ljung_box
-from bayes_mr.stats import integrated_time
+from bayes_mr.numerics.stats import integrated_time
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 from records import case_id, effect_cases, naming_failures, signal_record
 
 MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
@@ -135,7 +135,7 @@ def test_residual_figures_of_a_clean_record_show_the_baseline():
     matplotlib.use("Agg")
     from bayes_mr.report.diagnose import crosscorr_figure, residual_binned_figure, whiteness_figure
     from bayes_mr.diagnosis.residuals import residual_views
-    from bayes_mr.simulate import Inputs, simulate
+    from bayes_mr.simulation.simulate import Inputs, simulate
 
     rec = simulated_record("structure", "dahl", duration=2.0)
     m = get_model("dahl")

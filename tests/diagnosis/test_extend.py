@@ -5,7 +5,7 @@ import pytest
 from bayes_mr.diagnosis.extend import extend
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 
 
 def hidden_record(m_e: float | None, seed: int = 4):

@@ -10,12 +10,12 @@ The default run holds each effect once; the two-magnitude, two-seed matrix is ``
 import numpy as np
 import pytest
 
-from bayes_mr.diagnosis import THRESHOLD, diagnose
+from bayes_mr.diagnosis.diagnose import THRESHOLD, diagnose
 from bayes_mr.diagnosis.screen import applicable
 from bayes_mr.models import NONE, get_model
 from bayes_mr.models.effects import ON_COMMAND
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 from records import case_id, device_inputs, effect_cases, naming_failures, structure_inputs
 
 MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
@@ -225,8 +225,8 @@ def test_diagnose_offers_the_new_effects_only_where_they_apply():
 
 
 def test_the_ukf_engine_refuses_inertia_clearly():
-    from bayes_mr.inference.ukf import make_problem
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference.ukf.filter import make_problem
+    from bayes_mr.likelihood.output_error import OutputError
 
     rec, _ = hidden_record("device", "inertia", 1.0, duration=1.0)
     with pytest.raises(ValueError, match="inertia"):

@@ -5,12 +5,12 @@ import pytest
 
 from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.library import library
-from bayes_mr.diagnosis.terms import MIN_BLOCKS, folds, search_terms
-from bayes_mr.identify import predict
-from bayes_mr.likelihood import record_scales
+from bayes_mr.diagnosis.term_search import MIN_BLOCKS, folds, search_terms
+from bayes_mr.inference.identify import predict
+from bayes_mr.likelihood.output_error import record_scales
 from bayes_mr.models import get_model
 from bayes_mr.models import terms as lib
-from bayes_mr.simulate import Inputs, simulate
+from bayes_mr.simulation.simulate import Inputs, simulate
 from tests.records import signal_record
 
 OPTS = dict(noise=0.01, seed=1, signal_seed=3, duration=4.0, fs=500.0)

@@ -11,9 +11,9 @@ import json
 import numpy as np
 import pytest
 
-from bayes_mr.cli import main
+from bayes_mr.cli.commands import main
 from bayes_mr.data import load
-from bayes_mr.diagnosis import diagnose
+from bayes_mr.diagnosis.diagnose import diagnose
 from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.residuals import residual_views
 from bayes_mr.diagnosis.unexplained import AT_FLOOR, BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
@@ -117,7 +117,7 @@ def test_diagnose_out_writes_fits_that_validate_scores(tmp_path):
 def test_the_term_search_runs_by_default_where_the_model_stays_above_its_floor():
     """By default the term library is searched where what the model leaves is above the noise floor: with no
     effect named, or after the named ones (the measured damper: ~80× after four effects); never at the floor."""
-    from bayes_mr.diagnosis import _asked
+    from bayes_mr.diagnosis.diagnose import _asked
 
     above = {"verdict": f"partly explained by inertia; the rest {BEYOND}", "effects": ["inertia"], "at_noise_floor": False,
              "unexplained_ratio": 79.3}

@@ -9,7 +9,7 @@ KEYS = ("params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrm
 def _structure():
     from bayes_mr.models import get_model
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     model = get_model("dahl")
     sig = make_signal("blwn", duration=2.0, fs=500.0, amplitude=1.0, fmax=8.0, seed=11)
@@ -21,7 +21,7 @@ def _structure():
 def _device():
     from bayes_mr.models import get_model
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     model = get_model("dahl+force_offset")
     sig = make_signal("blwn", duration=2.0, fs=500.0, amplitude=0.01, fmax=5.0, seed=3)
@@ -40,8 +40,8 @@ CASES = {
 
 
 def estimator(engine: str):
-    import bayes_mr.identify as ident
-    from bayes_mr.inference.mcmc import MCMCSettings
+    import bayes_mr.inference.identify as ident
+    from bayes_mr.inference.mcmc.sampler import MCMCSettings
 
     if engine == "lsq":
         return ident.LeastSquares()
@@ -54,8 +54,8 @@ def estimator(engine: str):
 
 def fit_case(name: str) -> dict:
     """Summary keys of one golden case (JSON-ready)."""
-    from bayes_mr.identify import Identify
-    from bayes_mr.results import summary_of
+    from bayes_mr.inference.identify import Identify
+    from bayes_mr.inference.results import summary_of
 
     make, model, engine = CASES[name]
     idata = Identify(model, estimator(engine)).fit(make(), seed=0, progress=False)

@@ -11,8 +11,8 @@ from scipy import stats
 
 from bayes_mr.inference.calibrate import adjust_draws, input_noise_sd, loewner_max, truncate_to_box, within_prior
 from bayes_mr.inference.estimators import UKF, LeastSquares
-from bayes_mr.inference.lsq import LSQSettings
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.least_squares import LSQSettings
+from bayes_mr.likelihood.output_error import OutputError
 from records import coverage_study
 
 
@@ -49,7 +49,7 @@ def test_ukf_intervals_hold_the_truth_on_device_tests():
 
 def test_the_input_noise_widens_least_squares_where_the_hac_middle_misses_it():
     """On one record with 3 % input noise the calibrated SDs are at least the HAC ones, and wider for some."""
-    from bayes_mr.inference.lsq import fit_lsq
+    from bayes_mr.inference.lsq.least_squares import fit_lsq
 
     member = coverage_study().family("dahl", 1, seed=7)[0]
     lik = OutputError("dahl", member["record"])
@@ -65,7 +65,7 @@ def test_a_record_without_input_noise_keeps_its_covariance():
     """No noise on the input (``synthesize(noise=0)``): nothing to replicate, the HAC/GLS covariance stays."""
     from bayes_mr.models import get_model
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     model = get_model("dahl")
     sig = make_signal("elcentro", scale=0.5, fs=250.0, duration=2.0)

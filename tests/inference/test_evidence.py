@@ -6,22 +6,18 @@ import numpy as np
 import pytest
 
 from bayes_mr.data.schema import make_record
-from bayes_mr.inference import ukf
-from bayes_mr.inference import ukf_kernel as K
-from bayes_mr.inference.crosscheck import ukf_vs_mcmc
-from bayes_mr.inference.evidence import (
-    Evidence,
-    laplace_evidence,
-    select_route,
-    stepping_stone,
-    thermodynamic_integration,
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.inference.ukf import kernel as K
+from bayes_mr.inference.ukf.crosscheck import ukf_vs_mcmc
+from bayes_mr.inference.evidence.routes import (
+    Evidence, laplace_evidence, select_route, stepping_stone, thermodynamic_integration,
 )
-from bayes_mr.inference.ladder import BoxTarget, run_ladder
-from bayes_mr.inference.lsq import fit_lsq
-from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, sample
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.evidence.ladder import BoxTarget, run_ladder
+from bayes_mr.inference.lsq.least_squares import fit_lsq
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, sample
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
-from bayes_mr.simulate import simulate
+from bayes_mr.simulation.simulate import simulate
 from records import device_inputs, structure_record
 
 
@@ -86,7 +82,7 @@ def test_a_checkpointed_ladder_resumes_to_the_same_evidence(gaussian_case, tmp_p
     """Every temperature is a group of one HDF5 file; rerunning with resume=True redoes nothing."""
     from dataclasses import replace as _replace
 
-    from bayes_mr.inference.ladder import LADDER_SETTINGS
+    from bayes_mr.inference.evidence.ladder import LADDER_SETTINGS
 
     target, post, _ = gaussian_case
     settings = _replace(LADDER_SETTINGS, backend=tmp_path / "ladder.h5")
@@ -285,8 +281,8 @@ def test_a_ladder_rung_that_did_not_converge_is_named_and_its_evidence_refused(g
     """Rungs stopped far short of their ≥ N τ rule: TI and SS carry their β, and compare will not select on them."""
     from dataclasses import replace as _replace
 
-    from bayes_mr.comparison import _select
-    from bayes_mr.inference.ladder import LADDER_SETTINGS
+    from bayes_mr.selection.comparison import _select
+    from bayes_mr.inference.evidence.ladder import LADDER_SETTINGS
 
     target, post, *_ = gaussian_case
     short = _replace(LADDER_SETTINGS, max_steps=60, check_every=30, min_tau_multiple=50.0)

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from bayes_mr.inference.evidence_scale import LaplaceTerms, common_scale, log_volume, trace_hc, volume_terms
-from bayes_mr.inference.lsq import LSQSettings, fit_lsq
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.evidence_scale import LaplaceTerms, common_scale, log_volume, trace_hc, volume_terms
+from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+from bayes_mr.likelihood.output_error import OutputError
 from records import signal_record
 
 
@@ -81,7 +81,7 @@ def _hidden_effect_pair(fs: float) -> tuple[float, float]:
     asymmetry (neither candidate has it), 2 % noise on the input and outputs, 2 s of El Centro at ``fs``."""
     from bayes_mr.models import get_model
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     m = get_model("dahl+asymmetry")
     sig = make_signal("elcentro", scale=0.5, fs=fs, duration=2.0)

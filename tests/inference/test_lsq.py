@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from bayes_mr.data.schema import make_record
-from bayes_mr.inference.lsq import LinearSubfit, LSQSettings, fit_lsq, linear_names
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.least_squares import LinearSubfit, LSQSettings, fit_lsq, linear_names
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
-from bayes_mr.simulate import simulate
+from bayes_mr.simulation.simulate import simulate
 from records import device_inputs, structure_record
 
 STRUCTURE_CASES = [
@@ -136,7 +136,7 @@ def _ar1_output_noise_record(seed: int, a: float = 0.9, level: float = 0.02):
     from scipy.signal import lfilter
 
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     model = get_model("dahl")
     theta = model.theta("structure", {"c": 100.0, "k": 2.0e4, "F_d": 25.0, "sigma": 2500.0})
@@ -185,7 +185,7 @@ def test_calibration_of_iid_and_ar_intervals_with_input_noise():
     from scipy.stats import norm
 
     from bayes_mr.signals import make_signal
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     model, z90 = get_model("dahl"), norm.ppf(0.95)
     names = model.free_names("structure")
@@ -212,8 +212,8 @@ def test_laplace_evidence_gives_an_unidentified_parameter_nothing():
     """dahl vs dahl+voltage_dependence on a record with no voltage: the effect's parameters do not touch the
     output, so ln L is the same and ln Z must not grow (it grew by ~1000 nats when a flat direction's
     eigenvalue was clipped at 1e-300 and counted as a huge posterior width)."""
-    from bayes_mr.inference.lsq import LSQSettings, fit_lsq, posterior_log_volume
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq, posterior_log_volume
+    from bayes_mr.likelihood.output_error import OutputError
     from records import offset_device_record
 
     rec = offset_device_record(1.0, offset=0.0)
@@ -230,8 +230,8 @@ def test_unseen_parameter_is_reported_with_the_priors_spread_not_as_known():
     """The same record: the voltage parameters' sd is the uniform prior's (width/√12 in φ), not the zero a
     pseudo-inverse gives a direction without information; the seen parameters keep the base model's sd."""
     from bayes_mr.inference.calibrate import prior_on_unseen
-    from bayes_mr.inference.lsq import LSQSettings, fit_lsq
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+    from bayes_mr.likelihood.output_error import OutputError
     from records import offset_device_record
 
     rec = offset_device_record(1.0, offset=0.0)
@@ -254,7 +254,7 @@ def test_unseen_parameter_is_reported_with_the_priors_spread_not_as_known():
 
 def _forced_bouc_wen(truth: dict, seed: int, fs: float = 500.0, duration: float = 2.0):
     """A forced Bouc–Wen test (displacement only, 1 % noise) under a ramped 2–21 Hz multisine force."""
-    from bayes_mr.simulate import synthesize
+    from bayes_mr.simulation.simulate import synthesize
 
     t = np.arange(0.0, duration, 1.0 / fs)
     rng = np.random.default_rng(seed)
@@ -268,8 +268,8 @@ BW_FORCED = {"c": 200.0, "k": 5.0e4, "beta1": 800.0, "gamma": -1100.0, "n": 1.0,
 
 
 def test_too_stiff_start_is_rejected_at_the_sub_step_cap():
-    from bayes_mr.inference.refine import Residuals
-    from bayes_mr.inference.subfit import screen
+    from bayes_mr.inference.lsq.refine import Residuals
+    from bayes_mr.inference.lsq.subfit import screen
 
     lik = OutputError("bouc-wen", _forced_bouc_wen(BW_FORCED, seed=1))
     names = list(lik.par.names)

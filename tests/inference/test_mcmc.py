@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bayes_mr.inference.crosscheck import ukf_vs_mcmc
+from bayes_mr.inference.ukf.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.mcmc_posterior import mcmc_posterior
-from bayes_mr.stats import integrated_times
-from bayes_mr.inference.mcmc import MCMCSettings, fit_mcmc, sample
-from bayes_mr.inference.walkers import initial_walkers, reflect_into
+from bayes_mr.numerics.stats import integrated_times
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, sample
+from bayes_mr.inference.mcmc.walkers import initial_walkers, reflect_into
 
 
 def correlated_gaussian(d, seed):
@@ -112,7 +112,7 @@ def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow(monkeypatc
     Measured (seeds 0-2): the first round accepts 0.46-0.48, which ends the adaptation by default (τ 3.1-3.6,
     350-400 steps to the rule against 5.3-7.2 and 550-900 frozen); with the rounds made to go on, the second
     accepts 0.53-0.56 — here they do, so that the refit itself is what is tested."""
-    from bayes_mr.inference import mcmc
+    from bayes_mr.inference.mcmc import sampler as mcmc
 
     monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
@@ -136,7 +136,7 @@ def test_rounds_that_stall_below_the_floor_have_not_settled(monkeypatch):
     ``ADAPT_GAIN``): above ``ADAPT_FLOOR`` that ends the adaptation and the chain proposes from q alone on 8
     walkers. With the floor raised above where they stall the same stall is a poor q, not a settled one: every
     round runs, and the chain keeps the rounds' mixture on 2·d + 2 walkers — and is still exact."""
-    from bayes_mr.inference import mcmc
+    from bayes_mr.inference.mcmc import sampler as mcmc
 
     monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
@@ -256,7 +256,7 @@ def test_a_chain_that_cannot_meet_the_rule_in_its_budget_stops_when_that_is_proj
     seeds 0-2, ~1 s)."""
     import time
 
-    from bayes_mr.inference.convergence import MIN_PROJECTION_STEPS
+    from bayes_mr.inference.mcmc.convergence import MIN_PROJECTION_STEPS
 
     mu, C, _, fast = correlated_gaussian(30, seed=3)
 
@@ -277,7 +277,7 @@ def test_a_chain_that_cannot_meet_the_rule_in_its_budget_stops_when_that_is_proj
 
 def test_the_projection_needs_enough_steps_and_a_budget():
     """No projection before MIN_PROJECTION_STEPS of this run, without a budget, or while the rule fits."""
-    from bayes_mr.inference.convergence import MIN_PROJECTION_STEPS, projection
+    from bayes_mr.inference.mcmc.convergence import MIN_PROJECTION_STEPS, projection
 
     s = MCMCSettings()  # rule: (5 + 50) τ steps
     assert projection(10.0, 100, MIN_PROJECTION_STEPS - 1, 1.0, 2.0, s) is None
@@ -399,10 +399,10 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     """A short dahl posterior → InferenceData with every group, the contract's fit keys, and a netCDF round trip."""
     from records import structure_record
 
-    from bayes_mr import results
-    from bayes_mr.inference.evidence import laplace_evidence
-    from bayes_mr.inference.lsq import fit_lsq
-    from bayes_mr.likelihood import OutputError
+    from bayes_mr.inference import results
+    from bayes_mr.inference.evidence.routes import laplace_evidence
+    from bayes_mr.inference.lsq.least_squares import fit_lsq
+    from bayes_mr.likelihood.output_error import OutputError
 
     rec, _theta = structure_record("dahl", {}, n=1500, seed=3, rms=0.6, process=False)
     lik = OutputError("dahl", rec)
@@ -462,7 +462,7 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
     of the timed calls the fastest counts (here the first of them is held up 2 s, as by another job)."""
     import time
 
-    from bayes_mr.inference.budget import MIN_CHAIN_STEPS, TIMED_CALLS, OverBudget, check_budget, over_budget
+    from bayes_mr.inference.mcmc.wall_time import MIN_CHAIN_STEPS, TIMED_CALLS, OverBudget, check_budget, over_budget
 
     calls = []
 
@@ -486,7 +486,7 @@ def test_a_posterior_projected_past_its_budget_is_not_started():
 def test_a_covariance_a_rounding_error_from_definite_is_still_drawn():
     """A pseudo-inverse covariance whose smallest eigenvalue is slightly negative (beyond the 1e-12 jitter)
     still gives a lower factor; a definite one keeps its plain Cholesky factor."""
-    from bayes_mr.inference.moves import jittered_cholesky
+    from bayes_mr.inference.mcmc.moves import jittered_cholesky
 
     u = np.linalg.qr(np.random.default_rng(0).standard_normal((4, 4)))[0]
     cov = (u * np.array([4.0, 1.0, 1e-3, -1e-9])) @ u.T
@@ -520,7 +520,7 @@ def test_log_distance_is_chosen_only_where_it_fits_the_pilot_jointly():
     pilot better there. A Gaussian 2.5 SDs from its bound (inside EDGE_SDS) stays in x; marginals piled
     against either bound move; a piled marginal that moves in step with another coordinate (correlation
     0.99, as the Bouc–Wen benchmark's n with β₁ and γ) stays in x — alone it would move."""
-    from bayes_mr.inference.proposal import EDGE_SDS, fit_proposal
+    from bayes_mr.inference.mcmc.proposal import EDGE_SDS, fit_proposal
 
     rng = np.random.default_rng(1)
     lower, upper = np.zeros(3), np.full(3, 10.0)
@@ -547,8 +547,8 @@ def test_proposals_are_drawn_inside_the_box_and_the_chain_stays_exact():
     error (exact moments from 10⁶ rejection draws), and accepts more often than with the box withheld — every
     draw it would have placed outside, the target rejects. Seeds 0-4 pass; clipping the proposals into the box
     instead of drawing again (not exact: mass on the faces) fails every one of them on the means."""
-    from bayes_mr.inference.moves import Independence
-    from bayes_mr.inference.proposal import ProposalMap
+    from bayes_mr.inference.mcmc.moves import Independence
+    from bayes_mr.inference.mcmc.proposal import ProposalMap
 
     mu, cov = np.array([0.85, 0.75]), np.array([[0.09, 0.05], [0.05, 0.09]])
     lower, upper = np.zeros(2), np.ones(2)
@@ -590,7 +590,7 @@ def test_a_coordinate_piled_against_a_bound_is_proposed_in_log_distance_and_stay
     variance of an exponential-tailed coordinate then has a relative MCSE of √(8/1600) ≈ 7 % — the band was
     two of them, and the BLAS kernel of another CPU (rounding only) moved seed 3 to −16 %. At 500 τ eight
     seeds stayed within ±8.4 %."""
-    from bayes_mr.inference.proposal import fit_proposal
+    from bayes_mr.inference.mcmc.proposal import fit_proposal
 
     log_prob, lower, upper, mean, var = _piled_target()
     rng = np.random.default_rng(0)

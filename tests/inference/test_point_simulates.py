@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_mr import results
-from bayes_mr.identify import Identify
+from bayes_mr.inference import results
+from bayes_mr.inference.identify import Identify
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares
-from bayes_mr.inference.mcmc import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, simulate, synthesize
+from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 
 FS = 1000.0
 FREE = ("k0", "k1", "F_pre", "c0a", "alpha_a")

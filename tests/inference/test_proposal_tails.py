@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bayes_mr.inference.convergence import TAIL_MIN_DRAWS, tail_bound, tail_index
-from bayes_mr.inference.mcmc import MCMCSettings, sample
-from bayes_mr.inference.moves import DEFENSIVE_DF, DEFENSIVE_SHARE, PROPOSAL_DF, Independence
+from bayes_mr.inference.mcmc.convergence import TAIL_MIN_DRAWS, tail_bound, tail_index
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.moves import DEFENSIVE_DF, DEFENSIVE_SHARE, PROPOSAL_DF, Independence
 from inference.test_shear import B, log_banana
 
 NU = 3.0  # the target's degrees of freedom: heavier tailed than any proposal the sampler fits

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from bayes_mr.inference.mcmc import MCMCSettings, sample
-from bayes_mr.inference.moves import Independence
-from bayes_mr.inference.proposal import SHEAR_MIN_GAIN, fit_proposal, fit_shear, sheared, unsheared
+from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.moves import Independence
+from bayes_mr.inference.mcmc.proposal import SHEAR_MIN_GAIN, fit_proposal, fit_shear, sheared, unsheared
 
 #: x₁ ~ N(0, 1), x₂ | x₁ ~ N(B x₁², S²): a parabola-shaped ridge with exact moments
 #: E x₂ = B, Var x₂ = 2B² + S², Cov(x₁, x₂) = 0.

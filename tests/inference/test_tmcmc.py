@@ -1,13 +1,13 @@
-"""Transitional MCMC (:mod:`bayes_mr.inference.tmcmc`) against analytic evidences."""
+"""Transitional MCMC (:mod:`bayes_mr.inference.evidence.tmcmc`) against analytic evidences."""
 
 import math
 
 import numpy as np
 import pytest
 
-from bayes_mr.inference.evidence import tmcmc_evidence
-from bayes_mr.inference.ladder import BoxTarget
-from bayes_mr.inference.tmcmc import TMCMCSettings, eve_relative_variance, next_beta, run_tmcmc
+from bayes_mr.inference.evidence.routes import tmcmc_evidence
+from bayes_mr.inference.evidence.ladder import BoxTarget
+from bayes_mr.inference.evidence.tmcmc import TMCMCSettings, eve_relative_variance, next_beta, run_tmcmc
 from inference.test_evidence import gaussian_target, linear_device_problem
 
 
@@ -75,7 +75,7 @@ def test_tmcmc_finds_both_modes_of_a_bimodal_posterior_and_their_evidence():
 
 def test_a_starved_run_is_flagged_and_its_evidence_refused():
     """20 particles: weight ESS ≈ 10 per stage, below the health floor; compare will not select on it."""
-    from bayes_mr.comparison import _select
+    from bayes_mr.selection.comparison import _select
 
     target, *_ = gaussian_target(30.0, d=3)
     ev = tmcmc_evidence(run_tmcmc(target, TMCMCSettings(n_particles=20, seed=0)))
@@ -116,7 +116,7 @@ def test_the_eve_variance_of_one_stage_is_the_importance_sampling_variance():
 def test_the_opt_in_route_on_an_output_error_posterior_matches_the_analytic_evidence():
     """``Emcee(evidence="tmcmc")``: TMCMC from the posterior's reference q selects, Laplace beside it."""
     from bayes_mr.inference.estimators import Emcee
-    from bayes_mr.inference.mcmc import MCMCSettings
+    from bayes_mr.inference.mcmc.sampler import MCMCSettings
 
     lik, log_z, _ = linear_device_problem()
     settings = MCMCSettings(seed=0, progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)

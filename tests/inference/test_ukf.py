@@ -7,13 +7,13 @@ import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from bayes_mr.data.schema import make_record
-from bayes_mr.inference import ukf
-from bayes_mr.likelihood import OutputError
-from bayes_mr.inference import ukf_kernel as K
-from bayes_mr.inference import unscented_kernel as U
-from bayes_mr.inference.sigma import MerweScaled
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.inference.ukf import kernel as K
+from bayes_mr.inference.ukf import unscented as U
+from bayes_mr.inference.ukf.sigma_points import MerweScaled
 from bayes_mr.models import get_model
-from bayes_mr.simulate import Inputs, simulate
+from bayes_mr.simulation.simulate import Inputs, simulate
 from records import structure_record
 
 

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from bayes_mr.inference.estimators import UKF
-from bayes_mr.inference.lsq import fit_lsq, peak_from
-from bayes_mr.likelihood import OutputError
+from bayes_mr.inference.lsq.least_squares import fit_lsq, peak_from
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.signals import make_signal
-from bayes_mr.simulate import synthesize
+from bayes_mr.simulation.simulate import synthesize
 from records import coverage_study
 
 TRUTH = {"c": 100.0, "k": 2.0e4, "F_d": 25.0, "sigma": 2500.0}

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import pytest
 
-from bayes_mr import results
-from bayes_mr.identify import Identify
+from bayes_mr.inference import results
+from bayes_mr.inference.identify import Identify
 from bayes_mr.inference.estimators import UKF
 from independent_bw import TRUTH, table_3_2_record
 

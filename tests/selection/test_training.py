@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bayes_mr import results
+from bayes_mr.inference import results
 from bayes_mr.data.schema import make_record
-from bayes_mr.inference import ukf
-from bayes_mr.likelihood import OutputError
-from bayes_mr.inference import ukf_kernel as K
+from bayes_mr.inference.ukf import filter as ukf
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.inference.ukf import kernel as K
 from bayes_mr import scores as scores_mod
-from bayes_mr.inference import ukf_training as training_mod
-from bayes_mr.identify import UKF, Identify
-from bayes_mr.inference.ukf_training import concat_records, train
-from bayes_mr.inference.ukf_validation import validate_runs
+from bayes_mr.inference.ukf import training as training_mod
+from bayes_mr.inference.identify import UKF, Identify
+from bayes_mr.inference.ukf.training import concat_records, train
+from bayes_mr.inference.ukf.validation import validate_runs
 from bayes_mr.scores import score
 from bayes_mr.selection import Trial, best_trial, method1, method2, method3
 from records import signal_record, structure_record

@@ -18,9 +18,9 @@ sampling rates, 1 % noise) so that nothing is masked on clean data with a
 margin, and on the NEES MR-damper record, where nothing is masked either.
 """
 
-from .assessment import INPUTS, POLARITY, apply_quality, assess, default_channels, report_of
-from .config import QualityConfig
-from .report import FAULT_KINDS, Fault, QualityReport, Repair
+from bayes_mr.data.quality.assessment import INPUTS, POLARITY, apply_quality, assess, default_channels, report_of
+from bayes_mr.data.quality.config import QualityConfig
+from bayes_mr.data.quality.report import FAULT_KINDS, Fault, QualityReport, Repair
 
 __all__ = [
     "FAULT_KINDS", "Fault", "INPUTS", "POLARITY", "QualityConfig", "QualityReport", "Repair",

@@ -8,21 +8,12 @@ from dataclasses import replace
 import numpy as np
 import xarray as xr
 
-from ..derive import savgol_attrs, smooth_velocity
-from ..schema import DEVICE, FORCED, STRUCTURE
-from .config import QualityConfig
-from .consistency import consistent, repair_pair
-from .detectors import (
-    dilate,
-    end_events,
-    flats,
-    jumps,
-    rails,
-    runs,
-    spikes,
-    velocity_range,
-)
-from .report import FAULT_KINDS, Fault, QualityReport, Repair
+from bayes_mr.data.derive import savgol_attrs, smooth_velocity
+from bayes_mr.data.schema import DEVICE, FORCED, STRUCTURE
+from bayes_mr.data.quality.config import QualityConfig
+from bayes_mr.data.quality.consistency import consistent, repair_pair
+from bayes_mr.data.quality.detectors import dilate, end_events, flats, jumps, rails, runs, spikes, velocity_range
+from bayes_mr.data.quality.report import FAULT_KINDS, Fault, QualityReport, Repair
 
 #: Channels that drive a simulation (repaired across their own faults).
 INPUTS: dict[str, tuple[str, ...]] = {

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...stats import robust_sd
-from .detectors import runs
+from bayes_mr.numerics.stats import robust_sd
+from bayes_mr.data.quality.detectors import runs
 
 
 def mismatch(x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:

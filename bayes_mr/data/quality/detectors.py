@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ...stats import robust_sd
+from bayes_mr.numerics.stats import robust_sd
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:

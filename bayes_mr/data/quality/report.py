@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .config import QualityConfig
+from bayes_mr.data.quality.config import QualityConfig
 
 #: Fault kinds in report order.
 FAULT_KINDS = ("nonfinite", "clipped", "flat", "spike", "jump", "velocity_range", "end_disturbance")

@@ -1,0 +1,157 @@
+"""Identify a model from a record: one likelihood, any estimator, one result schema.
+
+>>> import bayes_mr as bm
+>>> job = bm.Identify(bm.get_model("dahl+force_offset"), bm.LeastSquares())   # doctest: +SKIP
+>>> idata = job.fit(record)                                                     # doctest: +SKIP
+
+:class:`Identify` binds (model, record) into the one
+:class:`~bayes_mr.likelihood.output_error.OutputError`, hands it to the estimator
+(``fit(likelihood, *, seed, progress) -> Posterior``, see
+:mod:`bayes_mr.inference.base`) and turns the posterior into InferenceData with
+:func:`bayes_mr.inference.results.build`, so comparison, validation and plotting do not
+care which engine ran.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from bayes_mr.inference import results
+from bayes_mr.inference.base import Estimator
+from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares, engine
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import Model, get_model
+from bayes_mr.scores import score
+from bayes_mr.simulation.simulate import Inputs, simulate
+
+__all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate"]
+
+
+def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
+            input_interp: str = "auto") -> dict[str, np.ndarray]:
+    """Simulated channels of ``model`` at parameters ``theta`` [SI] under ``record``'s inputs.
+
+    Missing parameters (the form's fixed ones) take their defaults; the
+    input between samples is read as ``input_interp`` says (:class:`Inputs`).
+
+    Raises
+    ------
+    ValueError
+        The simulation diverged (names the sample).
+    """
+    model = get_model(model)
+    sim = simulate(model, Inputs.from_record(record, input_interp), model.theta(record.attrs["kind"], theta))
+    if not sim.ok.all():
+        raise ValueError(f"{model.name} diverged at sample {int(sim.failed[0])} of {record.attrs.get('source')}")
+    return dict(sim.outputs)
+
+
+@dataclass(frozen=True)
+class Identify:
+    """A model, an estimator and optional prior settings: ``Identify(model, estimator).fit(record)``.
+
+    Attributes
+    ----------
+    model : Model or str
+    estimator : Estimator
+        ``LeastSquares()``, ``Emcee()``, ``UKF()`` or any object with ``name``
+        and ``fit(likelihood, *, seed, progress) -> Posterior``.
+    ranges : dict, optional
+        Plausible-range overrides name → (lo, hi) [SI].
+    fixed : dict, optional
+        Parameters held fixed, name → value [SI].
+    noise : {"iid", "ar"}
+        Residual model of the likelihood (:mod:`bayes_mr.likelihood.noise_model`):
+        independent Gaussian errors per channel, or an AR(p) process per
+        channel with p chosen by BIC on a first iid fit's residual. Least
+        squares, emcee, thermodynamic integration and stepping-stone all use
+        it. The UKF keeps its own iid measurement model: its evidence is the
+        innovation likelihood of its selected run, not comparable with the
+        other engines' (the fit JSON's ``evidence_note`` says so); only its
+        scores and pointwise log-likelihood use ``noise``.
+    input_interp : {"auto", "linear", "bandlimited"}
+        The input between samples (:mod:`bayes_mr.simulation.input_grid`): "auto" reads
+        the record's ``input_interp`` attribute, else its drive's bandwidth.
+    """
+
+    model: Model | str
+    estimator: Estimator = field(default_factory=LeastSquares)
+    ranges: dict | None = None
+    fixed: dict | None = None
+    noise: str = "iid"
+    input_interp: str = "auto"
+
+    def likelihood(self, record: xr.Dataset) -> OutputError:
+        """The binding of (model, record, noise model) every estimator consumes."""
+        return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
+                           residual=self.noise, input_interp=self.input_interp)
+
+    def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
+        """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's."""
+        t0 = _time.perf_counter()
+        lik = self.likelihood(record)
+        idata = results.build(lik, self.estimator.fit(lik, seed=seed, progress=progress))
+        results.set_wall(idata, _time.perf_counter() - t0)
+        return idata
+
+
+def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
+    """Thesis method 2: a fitted model predicts another record.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        A fit (:meth:`Identify.fit` or ``bayes-mr fit -o``).
+    record : xarray.Dataset
+        The other record, of the same kind.
+    warmup : float
+        Seconds at the start that are simulated (from rest, as always) but
+        not scored: the transient of a steady-state multisine, or one the
+        model does not describe.
+
+    Returns
+    -------
+    dict
+        The ``fit`` JSON keys for the new record: the fitted parameters, the
+        scores of the point estimate's prediction over the scored samples
+        (``mse`` over ``mse_channels``, ``rmse`` per measured channel [SI]),
+        ``warmup_s`` and the new record's ``input_interp`` (its attribute,
+        else from its drive's bandwidth).
+    """
+    summary = results.summary_of(idata)
+    if record.attrs["kind"] != summary.kind:
+        raise ValueError(f"the result is a {summary.kind} test, the record a {record.attrs['kind']} test")
+    if not (np.isfinite(warmup) and warmup >= 0):
+        raise ValueError(f"warmup must be a non-negative number of seconds, got {warmup}")
+    t0 = _time.perf_counter()
+    # parameters held fixed in the fit are not in the point estimate; without them the defaults would be used
+    interp = Inputs.from_record(record).interp
+    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)}, interp)
+    scores = score(_after(record, warmup), pred)
+    out = summary.to_dict()
+    out.update(
+        mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
+        force_nrmse=scores["force_nrmse"], rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)),
+        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0, input_interp=interp,
+        log_evidence=None, validated_on=str(record.attrs.get("source", "")),
+        trained_on=str(idata.posterior.attrs.get("source", "")),
+    )
+    return out
+
+
+def _after(record: xr.Dataset, warmup: float) -> xr.Dataset:
+    """The record with samples in its first ``warmup`` seconds left out of every score (``valid`` False)."""
+    if warmup == 0:
+        return record
+    time = record["time"].values
+    keep = time - time[0] >= warmup
+    if not keep.any():
+        raise ValueError(f"warmup {warmup} s is longer than the record ({time[-1] - time[0]:.6g} s)")
+    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(time.size, bool)
+    out = record.copy()
+    out["valid"] = ("time", valid & keep, record["valid"].attrs if "valid" in record else {})
+    return out

@@ -1,0 +1,159 @@
+"""Output-error least squares' inner loop: the standardised residual vector, its Jacobian and one refinement.
+
+:class:`Residuals` is the residual vector r(φ) = (y − ŷ(φ))/σ over the valid
+samples (prewhitened under an AR residual model) and its forward-difference
+Jacobian, the perturbed simulations replaying the base point's sub-step
+schedule (one grid, so the differences see the parameters and not the step
+control). :func:`refine` runs scipy's bounded trust-region least squares on
+it from one start; :mod:`bayes_mr.inference.lsq.least_squares` (the search, Laplace,
+evidence) and :mod:`bayes_mr.diagnosis.diagnose` (candidate refits) call it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.inference.lsq.subfit import stiff
+
+
+def standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
+    if lik.residual.kind == "iid":  # with no masked sample, no boolean-indexed copies (0.7 ms at 30 s, 1 kHz)
+        return (lik.y - yhat) / sd if lik.valid.all() else (lik.y[lik.valid] - yhat[lik.valid]) / sd
+    return lik.whiten(np.where(lik.valid[:, None], lik.y - yhat, 0.0))[lik.valid] / sd
+
+
+class Residuals:
+    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian.
+
+    ``cap``: most sub-steps per sample interval (the search's cost cap); a
+    simulation saturating it too often counts as a diverged one.
+    """
+
+    def __init__(self, lik: OutputError, sd: np.ndarray, cap: int | None = None):
+        self.lik = lik
+        self.sd = np.asarray(sd, float)
+        self.schedule = None
+        self.options = {} if cap is None else {"n_max": int(cap)}
+        self.cap = cap
+        self.last = None  # (φ, residual) of the last evaluation that simulated: the Jacobian's base point
+
+    def __call__(self, phi):
+        yhat, sim = self.lik.predict(phi, **self.options)
+        self.schedule = sim.schedule[0]
+        r = standardised(self.lik, yhat[0], self.sd)
+        self.last = None
+        if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
+            # a diverged (or, while searching, too stiff) simulation is a very bad fit, not a crash
+            worst = 1e3 * np.max(np.abs(self.lik.y[self.lik.valid]) / self.sd)
+            return np.full(r.size, worst)
+        self.last = (np.array(phi, float), r.ravel())
+        return r.ravel()
+
+    def jacobian(self, phi, central: bool = False):
+        p = phi.size
+        h = 1e-6 * np.maximum(1.0, np.abs(phi))
+        # trust-region asks for J(φ) right after r(φ): the base point is not simulated again (same numbers)
+        known = not central and self.last is not None and np.array_equal(self.last[0], phi)
+        batch = [] if known else [phi]
+        for j in range(p):
+            e = np.zeros(p)
+            e[j] = h[j]
+            batch.append(phi + e)
+            if central:
+                batch.append(phi - e)
+        if self.schedule is None:
+            self(phi)
+        yhat, _ = self.lik.predict(np.array(batch), schedule=self.schedule)
+        r = ([self.last[1]] if known else []) + [standardised(self.lik, yh, self.sd).ravel() for yh in yhat]
+        # a perturbed simulation that diverges says nothing about the slope: treat it as flat
+        r = [ri if np.all(np.isfinite(ri)) else r[0] for ri in r]
+        if not np.all(np.isfinite(r[0])):
+            return np.zeros((r[0].size, p))
+        J = np.empty((r[0].size, p))
+        for j in range(p):
+            if central:
+                J[:, j] = (r[1 + 2 * j] - r[2 + 2 * j]) / (2 * h[j])
+            else:
+                J[:, j] = (r[1 + j] - r[0]) / h[j]
+        return J
+
+
+#: Relative cost tolerance of the trust-region refinement: it stops after an accepted step that lowers
+#: ½Σr² by less than FTOL of itself. The cost of standardised residuals is about half their number, so this is
+#: ~1.5e-6 in log-likelihood on a 30-s, 1-kHz, two-channel record (3e4) and 5e-5 on 1e6 residuals — far below
+#: any difference the package reports or decides on. Measured on the bench's diagnose (70 refinements): with
+#: 1e-12, 36 % of the simulations were spent after the cost was within 1e-10 of its final value (the last two
+#: or three accepted steps lower it by ~1e-9 relative, then the trust region shrinks to ``xtol``); 1e-10 saved
+#: a sixth of them there (diagnose 15.7 → 14.8 s). An earlier round tried 1e-8 and the small-amplitude test
+#: record's diagnosis named the wrong cause; at 1e-10 the suite's hidden-effect tests all hold.
+FTOL = 1e-10
+
+
+#: scipy ``least_squares``' status when its callback raised StopIteration: a refinement :class:`Stall` stopped.
+STALLED = -2
+
+
+@dataclass(frozen=True)
+class Stall:
+    """Stop a refinement whose last ``steps`` accepted steps together lowered ½Σr² by less than ``nats``.
+
+    With residuals standardised by the noise SDs, ½Σr² is −ln L up to a
+    constant, so ``nats`` is a log-likelihood: a refinement crawling along a
+    ridge at that rate is stopped where what it could still gain is far below
+    what a caller decides on (diagnose's screen: a threshold of 8 on a score
+    of Δℓ/κ). The point returned is the last accepted one; scipy's status is :data:`STALLED`.
+    A caller that builds on the point (the next round's base) refines it again
+    without a stall rule.
+    """
+
+    steps: int = 3
+    nats: float = 0.05
+
+    def callback(self):
+        """A fresh ``least_squares`` callback applying the rule (it raises StopIteration)."""
+        seen: list[float] = []
+
+        def check(intermediate_result):
+            seen.append(float(intermediate_result.cost))
+            if len(seen) > self.steps and seen[-1 - self.steps] - seen[-1] < self.nats:
+                raise StopIteration
+
+        return check
+
+
+def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
+           cap: int | None = None, stall: Stall | None = None) -> optimize.OptimizeResult:
+    """Bounded trust-region least squares (scipy's ``trf``, ``x_scale="jac"``) of :class:`Residuals` from φ₀.
+
+    Parameters
+    ----------
+    lik : OutputError
+    phi0 : ndarray (p,)
+        Start [φ]; moved inside the box by 1e-9 of its width if it sits on a bound.
+    sd : ndarray (n_channels,)
+        Channel weights σ_c [channel units].
+    max_nfev : int
+        Most residual evaluations.
+    cap : int, optional
+        Most sub-steps per sample interval (:class:`Residuals`).
+    stall : Stall, optional
+        Stop early on a crawl (:class:`Stall`); None: only scipy's tolerances and ``max_nfev`` stop it.
+
+    Returns
+    -------
+    scipy.optimize.OptimizeResult
+        ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (:data:`STALLED`: stopped by ``stall``).
+    """
+    res_fn = Residuals(lik, sd, cap)
+    lo, hi = lik.phi_lo, lik.phi_hi
+    x0 = np.clip(phi0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+    return optimize.least_squares(
+        res_fn, x0, jac=res_fn.jacobian, bounds=(lo, hi), method="trf",
+        x_scale="jac", xtol=1e-12, ftol=FTOL, gtol=1e-12, max_nfev=max_nfev,
+        callback=None if stall is None else stall.callback(),
+    )
