@@ -144,7 +144,7 @@ def test_diagnose_on_this_process_threads_gives_the_result_in_turn(record, monke
     same cause, scores and extended model as one after another (one numba thread: no pool)."""
     import numba
 
-    from bayes_mr.diagnosis.diagnose import screen
+    from bayes_mr.diagnosis import screen
 
     seen = _spy_threads(monkeypatch, screen, "screen_job")
     a = diagnose(record, "dahl", progress=False)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from bayes_mr.diagnosis.diagnose import screen as screen_mod
+from bayes_mr.diagnosis import screen as screen_mod
 from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.screen import screen_one
 from bayes_mr.diagnosis.search import forward_select, settled
@@ -86,7 +86,7 @@ def test_a_kept_effect_is_refined_past_the_screens_stall(stribeck_record, monkey
 def test_restart_allows_stalled_starts_their_slack(monkeypatch):
     """Two refined starts that stopped on the stall rule 0.5 nats apart are one basin (no global search); the same
     spread without a stall, on a cost of 1500 (1e-4 relative is 0.15), is two basins and searches again."""
-    from bayes_mr.diagnosis.diagnose import search
+    from bayes_mr.diagnosis import search
     from bayes_mr.diagnosis.screen import Candidate
 
     ran = []
