@@ -12,8 +12,10 @@
    (:mod:`.residuals`).
 2. **Name the cause.** Fit every applicable effect of the SPEC as an
    extension of the baseline and score it by an autocorrelation-corrected
-   log Bayes factor; add effects greedily while one passes the calibrated
-   threshold (:mod:`.screen`). No effect passing is the answer ``none``.
+   log Bayes factor that decides whether it is there (:mod:`.screen`); of
+   those that pass, add the one that explains the most (:mod:`.ranking`),
+   and say which others the record cannot tell from it. No effect passing
+   is the answer ``none``.
 3. **Extend and measure.** Report the extended model's MSE ratio and
    evidence gain, and with ``validate`` its error ratio on another record
    (thesis method 2); write the SPEC's JSON and, with ``out_dir``, a Markdown
@@ -38,6 +40,7 @@ from bayes_mr.scores import score
 from bayes_mr.diagnosis.fits import Fit, fit_model, inference_data, predict
 from bayes_mr.diagnosis.residuals import residual_views, varying_voltage
 from bayes_mr.diagnosis.extend import fit_at
+from bayes_mr.diagnosis.ranking import ambiguous
 from bayes_mr.diagnosis.search import Search
 from bayes_mr.diagnosis.screen import THRESHOLD, Candidate
 from bayes_mr.diagnosis.term_search import search_terms
@@ -138,7 +141,9 @@ def diagnose(
     -------
     dict
         The SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
-        ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``),
+        ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``: those
+        that pass by the log-likelihood they add, :mod:`.ranking`), ``ambiguous`` and ``alternatives`` (the
+        effects the record cannot tell from the cause, and their extended models, :func:`_ambiguity`),
         ``extended`` {model, mse, log_evidence}, ``gain`` {mse_ratio, delta_log_evidence, validation_mse_ratio; also
         ``delta_log_evidence_calibrated`` at the pooled ``evidence_scale``, :func:`_calibrated_gain`} — and
         ``effects`` (all effects named, in the order they were added), ``selection`` (each forward-selection round),
@@ -258,6 +263,7 @@ def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], 
         "baseline": _fit_dict(base),
         "baselines": baselines,
         "cause": names[0] if names else NONE,
+        **_ambiguity(selected, rounds),
         "effects": names,
         "causes": _causes(rounds, selected),
         "selection": [dict(round=i + 1, **c.to_dict()) for i, c in enumerate(selected)],
@@ -271,6 +277,20 @@ def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], 
         },
         "validation": validation,
     }
+
+
+def _ambiguity(selected: list[Candidate], rounds: list[list[Candidate]]) -> dict:
+    """``ambiguous`` (the cause and the first round's passing effects the record cannot tell from it, cause
+    first; empty when it stands alone, :func:`.ranking.ambiguous`) and ``alternatives`` (each such effect's
+    extended model and the test against the cause)."""
+    if not selected or not rounds:
+        return {"ambiguous": [], "alternatives": []}
+    cause = selected[0]
+    ties = ambiguous(cause, rounds[0])
+    alternatives = [{"name": t["name"], "extended": _fit_dict(t["candidate"].fit),
+                     "mse_ratio": _num(t["candidate"].mse_ratio), "delta_loglik": _num(t["candidate"].delta_loglik),
+                     "difference": _num(t["difference"]), "sd": _num(t["sd"]), "z": _num(t["z"])} for t in ties]
+    return {"ambiguous": [cause.name] + [t["name"] for t in ties] if ties else [], "alternatives": alternatives}
 
 
 def _calibrated_gain(base: Fit, ext: Fit) -> dict:

@@ -20,6 +20,7 @@ import xarray as xr
 from bayes_mr.execution.executor import local_threads
 from bayes_mr.models import EFFECTS
 from bayes_mr.diagnosis.fits import Fit, global_refit, refit
+from bayes_mr.diagnosis.ranking import rank
 from bayes_mr.diagnosis.screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
 
 
@@ -136,7 +137,7 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
     """Greedy forward selection of effects.
 
     Screen every applicable effect (of ``candidates``, names, when given) against the current model; add the
-    best if it passes; re-screen the rest against the extended model; stop when nothing passes (or after
+    one that explains the most of those that pass (:func:`.ranking.rank`); re-screen the rest against the extended model; stop when nothing passes (or after
     ``max_effects``). ``executor`` fits each round's candidates as parallel jobs (:func:`~.screen.screen`). Each
     effect added is searched again globally first (:func:`restarted`) and refined on where the screen's stall
     rule stopped it (:func:`settled`).
@@ -157,7 +158,7 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
                    if e.name not in have and (candidates is None or e.name in candidates)]
         if not effects:
             break
-        ranked = screen(record, current, effects, seed=seed, progress=progress, executor=executor)
+        ranked = rank(screen(record, current, effects, seed=seed, progress=progress, executor=executor), threshold)
         rounds.append(ranked)
         best = ranked[0]
         if not passes(best, threshold):
@@ -171,7 +172,7 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
 def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] | None = None,
                   threshold: float = THRESHOLD, max_effects: int = 5, rank: bool = True, seed: int = 0,
                   progress=None, executor=None) -> tuple[list[Candidate], list[Candidate], list[Candidate]]:
-    """Rank the candidate effects once against ``base``; add the passing ones best first.
+    """Rank the candidate effects once against ``base``; add the passing ones best first (:func:`.ranking.rank`).
 
     The first passing effect is kept as ranked; each later one is refitted as
     an extension of the model so far (warm-started there,
@@ -215,7 +216,8 @@ def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] 
     names = offered if candidates is None else [n for n in candidates if n in offered]
     ranking: list[Candidate] = []
     if rank:
-        ranking = screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor)
+        ranking = rank(screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor),
+                       threshold)
         names = [c.name for c in ranking if passes(c, threshold)]
     selected: list[Candidate] = []
     tried: list[Candidate] = []
