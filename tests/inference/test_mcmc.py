@@ -224,8 +224,8 @@ def test_a_budget_that_leaves_room_for_the_chain_does_not_change_the_adaptation(
     """A slow density (3 ms a call) and a budget of 1.8 × what the unbudgeted run's pilot and rounds took: the
     rounds may spend what the budget leaves after the chain proper's first MIN_CHAIN_STEPS steps, so they end by
     their own rules, as without a budget, and the chain is the unbudgeted one's, step for step, until the clock
-    stops it. (A fixed share of the budget for pilot and rounds, e.g. half, would cut the last round short: a q
-    that depends on the machine's speed.)"""
+    stops it. (A fixed share of the budget for pilot and rounds, e.g. half, would cut the final adaptation round
+    short: a q that depends on the machine's speed.)"""
     import time
 
     mu, C, _, fast = correlated_gaussian(4, seed=2)
