@@ -424,7 +424,7 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
             f"({n_done[0]}/{len(effects)})")
 
     # the costliest first on an executor (an effect's fit costs about as its parameters: shear_thinning's three
-    # were a quarter of the bench's diagnose, and when submitted last they ended the round alone)
+    # are a quarter of the bench's diagnose, and submitted last they would end the round alone)
     jobs = [(rec, fitted, e, seed, STALL) for e in effects]  # a ranking: its refinements stop on a crawl
     outcomes = run_jobs(screen_job, jobs, executor=executor, on_done=finished, cost=[len(e.params) for e in effects])
     out = [_candidate(e, o) for e, o in zip(effects, outcomes)]

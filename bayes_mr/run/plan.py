@@ -64,8 +64,8 @@ class Budget:
     aside : bool
         Run the stages that need only the first pass (noise sensitivity, diagnosis, virtual shake table) in a
         child process at the lowest priority beside the posteriors (:mod:`bayes_mr.run.aside`; same results),
-        else after them here. Off by default: on 2 cores the posteriors hold both and the child got ~5 % of one
-        (measured, that module); for a machine with cores the job's threads leave idle.
+        else after them here. Off by default: on 2 cores the posteriors hold both and the child gets ~5 % of one
+        (that module); for a machine with cores the job's threads leave idle.
     """
 
     fs: float
