@@ -1,4 +1,4 @@
-"""Measure TMCMC against TI and stepping-stone on the same problems (issue 14, item 1).
+"""Measure TMCMC against TI and stepping-stone on the same problems.
 
 Single process, small problems; every route's likelihood evaluations are counted
 (:class:`bayes_mr.inference.evidence.tmcmc.Counted`). TI/SS count the β = 1 emcee posterior

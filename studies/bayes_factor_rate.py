@@ -4,7 +4,7 @@
 #     formats: py:percent
 # ---
 # %% [markdown]
-# # Bayes factors against the sampling rate (issue 14, items 4–5)
+# # Bayes factors against the sampling rate
 #
 # The working likelihood (iid, or AR by BIC per channel) counts every sample as new information. Under
 # model error the residual is smooth in time, so between two *wrong* forms ln BF ≈ (N/2)·ln(SSR ratio)

@@ -4,7 +4,7 @@
 #     formats: py:percent
 # ---
 # %% [markdown]
-# # Coverage of the reported 90 % intervals (issue 14, item 4)
+# # Coverage of the reported 90 % intervals
 #
 # Families of simulated structure tests (a 50 kg frame with an MR damper), three forms — modified
 # Dahl, modified LuGre, normalized Bouc–Wen — with the true parameters drawn log-normally (20 % SD)
@@ -19,13 +19,12 @@
 # A second family holds device tests of a Dahl damper (the measured displacement and velocity drive the
 # model, the force is the output; truths ±20 % about c = 300 N·s/m, k = 300 N/m, F_d = 40 N, σ = 3000 /m;
 # BLWN and up–down frequency and amplitude sweeps; 1–5 % noise on all three channels): there the noisy
-# input reaches the output directly, the case where the UKF's own covariance falls short (issue 14).
+# input reaches the output directly, the case where the UKF's own covariance falls short.
 #
 # Records are short (6 s at 250 Hz, 1,500 samples) and the engines' budgets small (emcee: stop at
 # 20 autocorrelation times or 3,000 steps; UKF: 3 LHS × 2 τ priors instead of 10 × 10, then its two
-# refinement passes). Measured under a shared load (~20 runnable processes on 2 cores): per record about
-# 10 s per least-squares fit, 45 s per emcee fit, 2–5 s per UKF fit; the 18 records (6 per form) about 70 min
-# there, less on an idle machine.
+# refinement passes). On 2 heavily shared cores a record takes about 10 s per least-squares fit, 45 s per
+# emcee fit and 2–5 s per UKF fit, the 18 records (6 per form) about 70 min; less on an idle machine.
 #
 # Run: `bayes-mr study coverage` (`--quick`: 2 truths per form, lsq and the UKF only).
 

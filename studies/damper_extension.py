@@ -6,16 +6,16 @@
 # %% [markdown]
 # # What the best model of the measured damper still misses, and what physics closes the gap
 #
-# Issue 15's question on the packaged NEES damper record: `spencer`, identified on part A, predicts part B
+# The main job's question on the packaged NEES damper record: `spencer`, identified on part A, predicts part B
 # (never fitted) at some force NRMSE; which effects of the vocabulary does the record ask for, and how well
 # does the extended physical model, trained on A only, predict B? The procedure is general
 # (:func:`bayes_mr.diagnosis.extend.extend`): the base model's least-squares optimum on A, every applicable
 # effect ranked once against it by diagnose's own autocorrelation-corrected score, the passing ones added
 # best first (each refitted as an extension of the current model and kept only if it still passes). All of
-# it at SEARCH_FS = 1 kHz (issue 15: the record's own rate or ≥ 1 kHz). The main job's 250 Hz smears each
+# it at SEARCH_FS = 1 kHz (the record's own rate or ≥ 1 kHz). The main job's 250 Hz smears each
 # command switch over a sample and cuts the force above 100 Hz: searched there and refitted at 1 kHz, the
-# same procedure chose one effect fewer (no field_dynamics) and reached part B NRMSE 0.1204; at the record's
-# own 3 kHz a refit of the 1-kHz model did no better (0.1223), at three times the cost.
+# same procedure chooses one effect fewer (no field_dynamics) and reaches part B NRMSE 0.1204; at the record's
+# own 3 kHz a refit of the 1-kHz model does no better (0.1223), at three times the cost.
 # Nothing sees part B before the scores.
 #
 # Run: `bayes-mr study damper-extension` (`--quick`: dahl on a 4-s window, a smoke test).

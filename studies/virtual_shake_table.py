@@ -16,8 +16,8 @@
 # never fitted (B).
 #
 # Run: `bayes-mr study virtual-shake-table` (`--quick`: one form, a short window, 5 LHS × 2 τ UKF runs: from x
-# and a only a run trains about two times in three, so the main job's quick 1 × 2 left none in some seeds — 0 of 2
-# in seeds 0 and 1 with the UKF at f241782, 1 of 2 in seed 0 before it; 6–7 of 10 in seeds 0–5 with 5 × 2).
+# and a only a run trains about two times in three, so the main job's quick 1 × 2 can leave none — 0 of 2 in
+# seeds 0 and 1; with 5 × 2, 6–7 of 10 train in seeds 0–5).
 
 # %%
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Each ``inject_*`` function returns a *new* record and the sorted indices of
 the samples it corrupted (the ground truth a detector must mask). The faults
-imitate what lab records carry (issue 7): a channel clipped at a rail value,
+imitate what lab records carry: a channel clipped at a rail value,
 isolated spikes, a dropout / flat-line, and the end-of-test jump-and-ring
 seen in the second measured record of the NEES MR damper (displacement
 jumps, velocity about three times anything before, force steps of about two

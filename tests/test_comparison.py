@@ -74,7 +74,7 @@ def test_compare_cli_json_and_table(tmp_path, device_csv, capsys):
     data = json.loads(out.read_text())
     assert {"rows", "selected", "bayes_factors"} <= set(data)
     assert data["selected"] == "dahl+force_offset" and data["evidence_route"] == "laplace"
-    # the calibrated evidence beside the raw one (issue 14): one k for both models, the same choice here
+    # the calibrated evidence beside the raw one: one k for both models, the same choice here
     assert data["selected_on"] == "calibrated" and 0 < data["evidence_scale"] <= 1
     assert data["selected_calibrated"] == "dahl+force_offset" and data["bayes_factors_calibrated"]["dahl"] > 0
     assert all(FIT_KEYS <= set(r) and "validation" in r for r in data["rows"])
@@ -133,7 +133,7 @@ def test_run_quick_end_to_end(tmp_path):
     for name in ("compare.csv", "spencer_parameters.csv", "summary.json", "force_part_b.png"):
         assert (out / name).exists(), name
     assert list((out / "fits").glob("*.nc"))
-    # the model choice under both residual models, the comparison's own first (issue 14)
+    # the model choice under both residual models, the comparison's own first
     assert s["noise"] == "iid" and set(s["noise_sensitivity"]) == {"iid", "ar"}
     for noise, d in s["noise_sensitivity"].items():
         assert d["selected"] in ("dahl", "lugre") and d["bayes_factors"][d["selected"]] == 0.0
@@ -141,7 +141,7 @@ def test_run_quick_end_to_end(tmp_path):
     key = "selected_calibrated" if s["selected_on"] == "calibrated" else "selected"
     assert s["noise_sensitivity"]["iid"][key] == s["selected"]
     assert "AR residual model" in text
-    # issue 15: the selected model diagnosed on the whole of part A at >= 1 kHz, its extension predicting B
+    # the selected model diagnosed on the whole of part A at >= 1 kHz, its extension predicting B
     d = s["diagnose"][s["selected"]]
     assert d["record"]["fs"] >= 1000 and d["record"]["duration_s"] == pytest.approx(s["record"]["part_a_s"], abs=0.01)
     assert d["baseline"]["model"] == s["selected"] and d["extended"]["model"].startswith(s["selected"])
@@ -151,7 +151,7 @@ def test_run_quick_end_to_end(tmp_path):
         assert d["gain"]["mse_ratio"] < 1
     assert d["unexplained_ratio"] > 0 and f"Diagnosis of {s['selected']}" in text
     assert (out / f"diagnose_{s['selected']}" / "extended.nc").exists()
-    # issue 15 item 4: the second record, prepared as part B was and never fitted
+    # the second record, prepared as part B was and never fitted
     sr = s["second_record"]
     assert sr["record"]["fs"] == pytest.approx(s["record"]["fs"]) and sr["record"]["duration_s"] > 1.0
     fitted = {(r["model"], r["engine"]) for r in s["rows"] if "error" not in r}

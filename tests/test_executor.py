@@ -1,4 +1,4 @@
-"""Grids of fits on an executor (issue 16): a Dask LocalCluster and a process pool give the in-process result.
+"""Grids of fits on an executor: a Dask LocalCluster and a process pool give the in-process result.
 
 One LocalCluster (2 worker processes, one thread each) serves the module; the
 CLI reaches it with ``--scheduler ADDRESS`` as a user reaches a running

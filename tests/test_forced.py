@@ -1,4 +1,4 @@
-"""Issue 13: forced tests, partial outputs, a signed Bouc–Wen γ, current-commanded dampers, scoring options.
+"""Forced tests, partial outputs, a signed Bouc–Wen γ, current-commanded dampers, scoring options.
 
 Every record here is simulated by the package with a fixed seed (2 s at 500 Hz, 1 % noise), fitted,
 and the known parameters must lie within 3 posterior SDs of the estimate.

@@ -1,15 +1,14 @@
-"""Golden fits: the redesign (issue 12) must reproduce what the tree gave before it.
+"""Golden fits: the estimators must reproduce the reference fits of ``tests/golden/fits.json``.
 
-``tests/golden/fits.json`` was written by ``tests/golden/capture.py`` on the tree
-before the estimator protocol and the one results builder. The same seed must
-give the same parameters, evidence and scores for every estimator, to the
+``tests/golden/fits.json`` holds the fits ``tests/golden/capture.py`` computes. The same
+seed must give the same parameters, evidence and scores for every estimator, to the
 arithmetic of the machine it runs on:
 
 - least squares and the UKF are deterministic: within :data:`DETERMINISTIC_RTOL`.
-  On the capture machine they agree bit for bit; on another CPU (other BLAS
-  kernels, other vector widths) round-off moves them, amplified by each fit's
-  conditioning — measured ≤ 2e-6 relative between the capture machine and an
-  AMD EPYC one (``structure-dahl-lsq``'s σ), where a 1e-9 tolerance failed five cases.
+  On one machine they agree bit for bit; on another CPU (other BLAS kernels, other
+  vector widths) round-off moves them, amplified by each fit's conditioning — up to
+  2e-6 relative between an Intel and an AMD EPYC machine (``structure-dahl-lsq``'s σ),
+  where a 1e-9 tolerance fails.
 - emcee is chaotic: once one bit differs, the walkers' paths part, so its posterior
   is compared within Monte Carlo error (:func:`assert_posterior_close`); its
   Laplace evidence comes from the least-squares fit and stays deterministic.

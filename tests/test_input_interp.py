@@ -1,4 +1,4 @@
-"""Band-limited input reconstruction (issue 13 item 6): closer to the truth near Nyquist, chosen per record."""
+"""Band-limited input reconstruction: closer to the truth near Nyquist, chosen per record."""
 
 import json
 

@@ -115,7 +115,7 @@ def test_study_section_copies_its_report_and_figures(tmp_path):
 
 
 def test_the_headline_says_which_posterior_did_not_converge_and_why():
-    """Issue 16 item 3: each unconverged chain with its length in τ and its R-hat; forms without a posterior
+    """Each unconverged chain with its length in τ and its R-hat; forms without a posterior
     named, the selected one first."""
     from bayes_mr.run.headline import _posterior_lines
 

@@ -88,7 +88,7 @@ def test_boucwen_benchmark_quick(tmp_path):
 
 @pytest.mark.slow
 def test_bayes_factor_rate_quick(tmp_path):
-    """Issue 14: the calibrated ln BF between two wrong forms barely moves from 250 Hz to 1 kHz; the raw one
+    """The calibrated ln BF between two wrong forms barely moves from 250 Hz to 1 kHz; the raw one
     grows (quick: one hidden-effect record, 2 s; ~1.5 min)."""
     out, summary = run_study("bayes-factor-rate", tmp_path, "--quick")
     assert (out / "report.md").exists() and (out / "ln_bf_vs_rate.png").exists()

@@ -4,8 +4,8 @@
 sides, RK4, filter steps). They never allocate, so they are compiled without
 numba's reference counting (``_nrt=False``): with it, every array argument of
 a branchy function is reference-counted with atomic operations on entry and
-exit, which measured 7× slower than the physics itself (deriv 103 ns → 14 ns,
-one RK4 step 620 ns → 87 ns on this machine). ``driver`` is for the loops
+exit, which is 7× slower than the physics itself (deriv 103 ns → 14 ns, one
+RK4 step 620 ns → 87 ns on one core). ``driver`` is for the loops
 that allocate their buffers once and call the hot functions.
 
 Both use ``error_model="numpy"`` (a division by zero gives inf/nan, which the
@@ -14,8 +14,8 @@ code on disk.
 
 Where: numba checks a cached function against its *own* file only, so
 machine code of :mod:`bayes_mr.models.drivers` inlined from an edited
-:mod:`bayes_mr.models.kernel` would be loaded stale (seen twice while
-building this package: the old physics ran silently). The cache therefore
+:mod:`bayes_mr.models.kernel` would be loaded stale, and the old physics
+would run silently. The cache therefore
 lives in a directory named by a hash of every source file of the package
 that compiles code (``$NUMBA_CACHE_DIR``, else ``$BAYES_MR_CACHE/numba`` or
 ``~/.cache/bayes_mr/numba``, then ``<hash>/``): an edit of any of them

@@ -15,13 +15,13 @@ on disk (:class:`_Auto`).
 
 Nearly all of those two minutes are the physics inlined at numba-IR level (:data:`INLINE`): the same kernel with
 the layout constant and nothing inlined there, the *quick* kernel (:data:`QUICK_INLINE`), compiles in ~20 s.
-Measured on one core, structure test, in ns per sample (full specialised / quick / inlined / generic; compile of
-the first two 121-132 s against 20-23 s): dahl 43 / 72 / 86 / 171, bouc-wen 190 / 240 / 259 / 497, spencer
-356 / 351 / 438 / 616. So once a layout's work pays, ``auto`` compiles both: the quick kernel at once, and the
+On one core, structure test, in ns per sample (full specialised / quick / inlined / generic; compile of the
+first two 121-132 s against 20-23 s; ``bayes-mr bench`` measures these, :mod:`bayes_mr.bench.kernels`): dahl
+43 / 72 / 86 / 171, bouc-wen 190 / 240 / 259 / 497, spencer 356 / 351 / 438 / 616. So once a layout's work pays, ``auto`` compiles both: the quick kernel at once, and the
 full one at the lowest CPU priority (:data:`BACKGROUND_NICE`), on the cores the job leaves idle: it runs where it
-is ready (in a later process, or later in a long one) and never takes a core from the job that asked for it. On
-an empty cache ``make run`` spent 219 s more on spencer's posterior (418 against 199 s) while the full compile
-shared its two cores — for a kernel no faster than the quick one on that model.
+is ready (in a later process, or later in a long one) and never takes a core from the job that asked for it: at
+the job's own priority, on an empty cache and 2 cores, the full compile doubles the time of ``make run``'s
+spencer posterior — for a kernel no faster than the quick one on that model.
 
 Between the two sits the *inlined* kernel (:func:`inlined`): the generic kernel with the per-sub-step
 physics inlined (:data:`INLINE`) but the layout still read at run time. One compile serves every model, so
@@ -37,8 +37,8 @@ every module the kernel reaches, so editing the physics gives new modules instea
 concurrent processes (pytest workers, Dask) never see a partial file; two processes compiling the same
 kernel at once both succeed, and numba's own index writes are atomic too. A background compile is claimed by
 the first process that starts it (``*.claim``, :func:`bayes_mr._compile.worker.claim`): processes sharing a
-cache start one child per kernel, not one each (three experiment processes here had each compiled the same
-bouc-wen kernel for 13 min, 1.4 GB apiece).
+cache start one child per kernel, not one each (a bouc-wen kernel's full compile takes minutes and over a GB of
+memory: one per process would multiply both).
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ KERNELS_ENV = "BAYES_MR_KERNELS"
 AUTO_WORK = 2e8
 #: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this many
 #: sample-steps have been asked of the generic kernel in the process, over all layouts. ~140 s of one core once per
-#: machine (141 s measured alone, dahl structure test; ~40 s when this tier was added), it takes the generic step
+#: machine (dahl structure test, alone), it takes the generic step
 #: 1.4-2× faster for every model (dahl 171 -> 86 ns): a diagnose — dozens of layouts, none worth its own compile — pays.
 INLINED_WORK = 2e7
 #: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to

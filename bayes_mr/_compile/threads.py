@@ -5,12 +5,12 @@ parameter sets, walkers and priors, on numba's OpenMP pool) and spreads jobs
 over processes (:mod:`bayes_mr.execution.executor`). Its BLAS calls are small and
 interleaved with those batches: the SVD of a tall Jacobian with a few
 columns in every trust-region step of least squares, p × p Hessians and
-covariances. On those, OpenBLAS's own thread pool is a loss twice over —
-measured on the 2-core machine of the README's bench: the SVD of a 60000 × 6
-Jacobian takes 5.0 ms on two OpenBLAS threads and 2.7 ms on one, and the
-pool's threads, spinning between calls, hold the cores numba's next batch
-needs (``diagnose`` of the bench's 30-s, 1-kHz record: 42 s → 16 s wall,
-84 s → 32 s of CPU, same result).
+covariances. On those, OpenBLAS's own thread pool is a loss twice over on
+2 cores: the SVD of a 60000 × 6 Jacobian takes 5.0 ms on two OpenBLAS
+threads and 2.7 ms on one, and the pool's threads, spinning between calls,
+hold the cores numba's next batch needs (``diagnose`` of the 30-s, 1-kHz
+record of ``bayes-mr bench``: 42 s → 16 s wall, 84 s → 32 s of CPU, same
+result).
 
 So the compute layer (:mod:`bayes_mr._compile.jit`, imported by everything that
 simulates) limits every BLAS library loaded in the process to one thread
@@ -21,10 +21,10 @@ another number (e.g. for a notebook that also does large dense algebra);
 numba's own pool (the GNU OpenMP layer here) has the same habit: after each
 parallel batch its threads spin, waiting for the next, and between batches
 the job runs Python (emcee's bookkeeping, least squares' trust-region
-steps) for most of its time. Measured on the 2-core machine: a loop of
-short batches with Python between them held 2.0 cores where its work
-needed 1.23; in ``make run`` the job's process held both cores for 15
-minutes, and a kernel compiling beside it at low priority got none.
+steps) for most of its time. On 2 cores a loop of short batches with
+Python between them holds 2.0 cores where its work needs 1.23, and in
+``make run`` a kernel compiling beside the job at low priority gets no
+core at all.
 :func:`passive_wait` sets ``OMP_WAIT_POLICY=PASSIVE`` (sleeping threads)
 unless the environment says otherwise — before numba starts its pool,
 which reads it once.

@@ -56,7 +56,7 @@ def _load(path: Path):
 def ready_path(path: Path, argtypes: tuple) -> Path:
     """Marker written once the kernel at ``path`` is compiled into the disk cache for ``argtypes``; its name hashes
     numba's cache directory (keyed on the package's sources, :mod:`bayes_mr._compile.jit`) so that after an edit an old
-    marker cannot make ``auto`` compile in the calling process (it did: a compare's UKF row took 173 s, not 4)."""
+    marker cannot make ``auto`` compile in the calling process (a compare's UKF row would take minutes, not seconds)."""
     key = (path, argtypes, numba.config.CACHE_DIR)
     marker = _markers.get(key)  # memoised: every kernel call asks
     if marker is None:
@@ -71,7 +71,7 @@ def mark_ready(marker: Path, name: str, argtypes: tuple) -> None:
 
 
 #: A claim older than this [s] is taken over whoever made it (a compile at the lowest priority on a busy machine
-#: has taken 13 min; a claimant on another host, or one whose process id was reused, cannot be checked otherwise).
+#: can take 13 min; a claimant on another host, or one whose process id was reused, cannot be checked otherwise).
 CLAIM_STALE_S = 3600.0
 
 

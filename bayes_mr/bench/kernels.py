@@ -1,7 +1,7 @@
 """Bench figures of the compiled kernels: generic, inlined and specialised per model, and their compile time.
 
-Kept apart from :mod:`bayes_mr.bench.benchmark` (which calls :func:`kernel_bench`) so
-the kernel figures live next to nothing else:
+:func:`kernel_bench` measures them for :mod:`bayes_mr.bench.benchmark`; they time the
+compile tiers of :mod:`bayes_mr._compile.specialise` rather than an engine:
 
 * ``simulate_ns_per_step`` — ``{form: {"generic": ns, "inlined": ns, "specialised": ns}}``:
   one parameter set, one thread, a structure test on the first 10 s of

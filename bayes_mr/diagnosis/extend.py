@@ -1,6 +1,6 @@
 """Extend a fitted model with the physics a record asks for, and measure it on a part it never saw.
 
-The main job's question on a measured damper (issue 15): the selected model,
+The main job's question on a measured damper: the selected model,
 trained on part A, predicts part B at some force NRMSE; which effects of the
 vocabulary does the record ask for, and how well does the extended model,
 trained on A only, predict B?

@@ -4,7 +4,7 @@
 (diagnose's default); :func:`ranked_select` ranks them once and adds the
 passing ones best first (a stiff model on a long record). Either way an effect
 that passes is searched again over every parameter before it is kept
-(:func:`restarted`, issue 15 item 5): the local refits of the screen start at
+(:func:`restarted`): the local refits of the screen start at
 the base optimum, which may already have absorbed part of the effect. A
 ranking's refinements stop on a crawl (:data:`.screen.STALL`); the effect that is
 kept is refined on from there (:func:`settled`) before the next round builds on it.
@@ -147,7 +147,7 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
     selected : list of Candidate
         Effects added, in order (each scored against the model before it).
     rounds : list of list of Candidate
-        The ranked screen of each round (round 0 is against the baseline).
+        The ranked screen of each round (the first, at index 0, is against the baseline).
     """
     selected: list[Candidate] = []
     rounds: list[list[Candidate]] = []

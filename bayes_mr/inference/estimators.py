@@ -176,7 +176,7 @@ class UKF:
         the chosen run sat in another basin (ε ≈ 0.3 where the peak has
         ε ≈ 18; c 7 SD off with 100 priors); with the offset every one of the
         90 true values lay within 2.4 SD, 85 of 90 inside the 90 % interval.
-        This replaces a floor at least squares' calibrated sandwich, which
+        A floor at least squares' calibrated sandwich was rejected: it
         over-covered: the filter treats input noise as process noise and its
         estimates lay 3× closer to the truth than that sandwich said (median
         |z| 0.23 on Dahl records, against 0.67 for a calibrated interval).

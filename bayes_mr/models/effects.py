@@ -19,7 +19,7 @@ parameters (and sometimes a state) to the model. The kernel applies them as:
   interpolation);
 * ``cubic_stiffness`` — a hardening frame, f_r += k3·x³.
 
-Issue 15 added effects the MR-damper literature knows (each cited in its
+Effects the MR-damper literature knows (each cited in its
 constant's comment; equations in ``docs/CONTRACT.md``):
 
 * ``command_saturation`` — the field saturates with the command: the filtered

@@ -11,14 +11,13 @@ job's own threads leave, and yields a core the moment one of them wakes, so
 the posteriors' budget of wall seconds is not spent on it.
 :meth:`Aside.collect` waits for the stages after the posteriors.
 
-It is off in ``make run`` (:attr:`bayes_mr.run.plan.Budget.aside`), measured:
-on the 2-core machine the posteriors leave almost nothing. A fresh clone's
-``make run`` with it on kept its posteriors' time (460 s against 454 s) but
-the child's least squares of normalized-bouc-wen under the AR residual took
-165 s against 6 s in process (about 4 % of a core), so its stages ran after
-the posteriors on one thread (diagnosis 318 s against 189-212 s on two) and
-the job took 978 s against 848-875 s. It is for a machine whose cores the
-job's threads do not fill.
+It is off in ``make run`` (:attr:`bayes_mr.run.plan.Budget.aside`): on 2
+cores the posteriors leave almost nothing. The posteriors keep their time,
+but the child gets about 4 % of a core (its least squares of
+normalized-bouc-wen under the AR residual takes minutes instead of seconds),
+so its stages end up running after the posteriors on one thread and the job
+takes longer than with the stages in process. It is for a machine whose
+cores the job's threads do not fill.
 
 Nothing depends on which process ran a stage: each is deterministic in its
 arguments (seeded; a compiled batch computes its members independently of

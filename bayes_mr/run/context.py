@@ -3,7 +3,7 @@
 :func:`published_spencer` predicts the record with Spencer et al. (1997)'s
 published parameters next to the identified ones; :func:`noise_sensitivity`
 refits every form under the other residual model so the report can say how
-the model choice and the Bayes factors move with it (issue 14).
+the model choice and the Bayes factors move with it.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from bayes_mr.inference.identify import predict
 from bayes_mr.models import get_model
 from bayes_mr.scores import score
 
-#: Where the published Spencer (1997) parameters come from (issue #6; a secondary source).
+#: Where the published Spencer (1997) parameters come from (a secondary source).
 SPENCER_SOURCE = ("Spencer, Dyke, Sain & Carlson (1997), J. Eng. Mech. 123(3), prototype damper, "
                   "as quoted in a secondary source (not checked against the paper); converted to SI")
 
@@ -41,7 +41,7 @@ def noise_sensitivity(part_a: xr.Dataset, forms: tuple[str, ...], noise: str, ro
     The comparison's own likelihood treats the residual as ``noise``;
     here every form is refitted with the other one (``iid`` ↔ ``ar``), so the
     report can say how the selection and the ln Bayes factors move when the
-    residual's correlation in time is (or is not) modelled (issue 14: an iid
+    residual's correlation in time is (or is not) modelled (an iid
     likelihood's ln BF grows with the sampling rate, an AR one with the
     information in the record).
 

@@ -263,7 +263,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     record : xarray.Dataset, optional
         A device test to use instead of the packaged NEES record.
     validate : xarray.Dataset, optional
-        A second test of the same damper (issue 15 item 4). It is trimmed and decimated as the record is and
+        A second test of the same damper. It is trimmed and decimated as the record is and
         held out whole: every fit of the comparison predicts it, and so do the diagnosis's baseline and
         extended model at the diagnosis's rate (``summary.json``'s ``second_record``). Checked before the
         comparison starts: a record of another kind or without the channels the fits read stops the job

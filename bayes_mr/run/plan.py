@@ -41,8 +41,8 @@ class Budget:
     ukf_taus : tuple of float
         Indices of dispersion (thesis: ten).
     input_interp : {"linear", "bandlimited"} or None
-        Inputs between samples (None: ``auto``). ``make run`` keeps linear, as every earlier run: ``auto`` read
-        its record at 250 Hz band-limited (S = 11, measured), several times the run's budget.
+        Inputs between samples (None: ``auto``). ``make run`` keeps linear: ``auto`` reads
+        its record at 250 Hz band-limited (S = 11), which costs several times the run's budget.
     noise : {"iid", "ar"}
         Residual model of the comparison's likelihood (``Identify.noise``).
         The other one is also fitted by least squares, so the report says how
@@ -51,7 +51,7 @@ class Budget:
         Diagnose the selected model on the first this-many seconds of part A
         (None: all of A; 0: no diagnosis).
     diagnose_fs : float or None
-        Sampling rate of the diagnosis [Hz] (None: :attr:`fs`). Issue 15: the
+        Sampling rate of the diagnosis [Hz] (None: :attr:`fs`). The
         record's own rate or ≥ 1 kHz — a command switch and the field's
         sub-millisecond lag are below a 4-ms sample.
     shake_table_engines : tuple of str
@@ -64,8 +64,8 @@ class Budget:
     aside : bool
         Run the stages that need only the first pass (noise sensitivity, diagnosis, virtual shake table) in a
         child process at the lowest priority beside the posteriors (:mod:`bayes_mr.run.aside`; same results),
-        else after them here. Off by default: on 2 cores the posteriors hold both and the child got ~5 % of one
-        (measured, that module); for a machine with cores the job's threads leave idle.
+        else after them here. Off by default: on 2 cores the posteriors hold both and the child gets ~5 % of one
+        (that module); for a machine with cores the job's threads leave idle.
     """
 
     fs: float

@@ -7,7 +7,7 @@ decimated to the job's rate, part A to train and part B never fitted).
 of the same device: other motion, other command) comparable with them —
 same trim, same rate, same inputs between samples, all of it held out — and
 :func:`predict_other` scores every fit of the comparison on it (thesis
-method 2 across records, issue 15 item 4); :func:`diagnosis_on_other` scores
+method 2 across records); :func:`diagnosis_on_other` scores
 the diagnosis's baseline and extended model, and :func:`second_record` does
 both for the main job.
 """

@@ -1,4 +1,4 @@
-"""Fits survive faults once they are masked; the CLI reports and scores only the rest (issue 7).
+"""Fits survive faults once they are masked; the CLI reports and scores only the rest.
 
 test_quality.py shows that each fault is found, masked and reported. Here the
 point is what the mask is for: a model fitted to a faulty record after quality

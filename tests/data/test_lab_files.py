@@ -1,4 +1,4 @@
-"""The files labs have: MATLAB (v5, v7.3) and HDF5 records with a column mapping; corrupted records (issue 13, item 9).
+"""The files labs have: MATLAB (v5, v7.3) and HDF5 records with a column mapping; corrupted records.
 
 The property-based tests corrupt small slices of the packaged NEES record at
 random and require either a one-line :class:`RecordError` or a record (with

@@ -1,4 +1,4 @@
-"""Quality control: faults are masked and reported, clean records are left alone (issue 7)."""
+"""Quality control: faults are masked and reported, clean records are left alone."""
 
 from __future__ import annotations
 
@@ -154,7 +154,8 @@ def test_end_disturbance_on_real_record(nees):
 
 
 def test_end_disturbance_scores_like_the_issue(nees):
-    """The disturbance is what issue 7 describes: it dominates a force error unless masked."""
+    """The end-of-test disturbance of lab records (``faults.inject_jump_and_ring``): it dominates a force error
+    unless masked."""
     ds, idx = inject_jump_and_ring(nees, 0.98)
     f0, f1 = nees["force"].values, ds["force"].values
     before = np.abs(np.diff(f0[: idx[0]])).max()

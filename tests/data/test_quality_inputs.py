@@ -1,4 +1,4 @@
-"""Quality control on the inputs of thesis chapter 5 (issue 13, item 8).
+"""Quality control on the inputs of thesis chapter 5.
 
 No false alarm on a family of clean simulated tests — step (Table 5.1: 10 mm
 over 0.1 s, then held), pulse, sine dwell, sweeps, earthquakes and band-limited

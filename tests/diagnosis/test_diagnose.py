@@ -239,7 +239,7 @@ def test_clean_record_gives_none_more_forms(case):
 
 
 def test_a_named_extension_reaches_its_optimum():
-    """Issue 15 item 5: a small-amplitude regime (r_s 0.3 below 0.3 mm, amplitude sweep) that the base dahl
+    """A small-amplitude regime (r_s 0.3 below 0.3 mm, amplitude sweep) that the base dahl
     half absorbs (its damping and noise SD move). The screen's local refits, warm-started there, stop at MSE
     ratio 0.095 with the right cause; the extension refitted from the truth reaches 0.0033. The named
     extension's global restart (differential evolution over every parameter) must reach that basin."""

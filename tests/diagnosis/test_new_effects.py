@@ -1,4 +1,4 @@
-"""The issue-15 effects: their physics, their composition, and diagnose naming them when hidden.
+"""The command-path, fluid, friction and inertia effects: their physics, their composition, and diagnose naming them when hidden.
 
 Hidden-effect records are simulated like those of ``test_diagnose.py`` (1 % RMS noise on the
 input and on every output, a dahl storey of 50 kg or a dahl damper on a device test); the effects

@@ -1,4 +1,4 @@
-"""Open-ended term discovery (issue 15 item 3): library terms in the kernel, the search, the refit."""
+"""Open-ended term discovery: library terms in the kernel, the search, the refit."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Capture the golden fits the redesign must reproduce (run once, before the change).
+"""Capture the golden fits the estimators must reproduce (rerun only to change the reference on purpose).
 
 ``python tests/golden/capture.py`` writes ``tests/golden/fits.json``: for a small
 structure test and a small device test, the summary of every estimator with a

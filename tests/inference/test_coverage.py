@@ -1,4 +1,4 @@
-"""Calibration: the engines' 90 % intervals hold the truth about 90 % of the time under input noise (issue 14).
+"""Calibration: the engines' 90 % intervals hold the truth about 90 % of the time under input noise.
 
 The families are the coverage study's (``studies/coverage.py``): simulated structure tests with 1–5 %
 RMS noise on the measured input and on the outputs, truths drawn around the thesis's values.
@@ -20,7 +20,7 @@ def test_least_squares_intervals_hold_the_truth_under_input_noise():
     """5 Dahl structure tests (20 true parameter values), least squares under iid: at least 15 inside.
 
     Binomial argument (k = 15 of n = 20): a calibrated engine (p = 0.9) fails with probability 1.1 %; an
-    engine at the old coverage (p ≈ 0.5–0.6 measured on input-noise families) passes with 2–13 %. The
+    engine that ignores the input noise (p ≈ 0.5–0.6 measured on input-noise families) passes with 2–13 %. The
     parameters of one record are correlated, so the effective n is smaller and the test weaker than that,
     not stricter. Measured: 18/20 (worst |z| 1.9) with the input-noise sandwich, 13/20 (worst |z| 4.4)
     with the HAC covariance alone (``input_noise_replicas=0``) on the same fits; ~13 s of CPU.

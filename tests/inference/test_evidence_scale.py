@@ -1,5 +1,5 @@
 """The calibrated (magnitude-adjusted) Laplace evidence: k = 1 where the working likelihood is right, and a
-Bayes factor between two wrong forms that does not grow with the sampling rate (issue 14)."""
+Bayes factor between two wrong forms that does not grow with the sampling rate."""
 
 import math
 

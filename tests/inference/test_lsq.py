@@ -179,7 +179,7 @@ def test_calibration_of_iid_and_ar_intervals_with_input_noise():
     """Why the default stays ``iid``: 20 Dahl structure records (parameters ×0.7…1.4 of the defaults,
     8 s at 500 Hz, 1 % noise by ``synthesize`` on the felt input and the outputs, plus 2 % white noise on
     the recorded input), the fraction of true parameters inside least squares' 90 % interval under each
-    residual model. Measured (issue 14): iid 49/80 = 0.61, ar 35/80 = 0.44: on input noise the AR
+    residual model. This test measures iid 49/80 = 0.61, ar 35/80 = 0.44: on input noise the AR
     whitening (a high-pass) weights the band where the noise-dithered response departs from the model, and
     the GLS estimate of the Dahl shape moves away from the truth."""
     from scipy.stats import norm

@@ -208,9 +208,9 @@ def test_a_wall_time_budget_stops_the_run_and_says_so():
     free = sample(fast, mu, C, MCMCSettings(seed=1, progress=False))
     assert free.converged and free.stopped == "converged"
     # the check the clock forces sits off the check_every grid; a chain that meets the rule there is converged,
-    # and says so in both fields (it once read converged False with stopped "converged": "NOT converged (converged)")
-    # the clock's budget is three times what the same chain takes to converge on this machine when checked on the
-    # usual grid (a fixed 2 s once ended at R-hat 1.0101 on a slow machine: the test must not depend on its speed)
+    # and says so in both fields (converged True and stopped "converged", never "NOT converged (converged)")
+    # the clock's budget is three times what the same chain takes to converge on the machine running the test when
+    # checked on the usual grid (a fixed budget would make the test depend on the machine's speed)
     de = MCMCSettings(seed=1, pilot_steps=0, moves=(("de", 0.8), ("snooker", 0.2)), progress=False)
     t1 = time.perf_counter()
     assert sample(fast, mu, C, de).converged
@@ -224,8 +224,8 @@ def test_a_budget_that_leaves_room_for_the_chain_does_not_change_the_adaptation(
     """A slow density (3 ms a call) and a budget of 1.8 × what the unbudgeted run's pilot and rounds took: the
     rounds may spend what the budget leaves after the chain proper's first MIN_CHAIN_STEPS steps, so they end by
     their own rules, as without a budget, and the chain is the unbudgeted one's, step for step, until the clock
-    stops it. (With half the budget for pilot and rounds, the old rule, the last round was cut short: a q that
-    depended on the machine's speed.)"""
+    stops it. (A fixed share of the budget for pilot and rounds, e.g. half, would cut the final adaptation round
+    short: a q that depends on the machine's speed.)"""
     import time
 
     mu, C, _, fast = correlated_gaussian(4, seed=2)

@@ -1,4 +1,4 @@
-"""Issue 14, defect 5: the point every engine reports simulates, and Spencer's preload is what is estimated.
+"""The point every engine reports simulates, and Spencer's preload is what is estimated.
 
 A small simulated device test of ``spencer`` with the accumulator pair free:
 ``k1`` and the preload ``F_pre = k1·x0`` are estimated, ``x0`` is reported as

@@ -86,7 +86,7 @@ def test_the_defensive_component_bounds_the_weights_of_a_heavier_tailed_target()
     t₂₀ alone 0.64-0.77, with the default share −0.01 to 0.13. A proposal without the t₄, or one whose t₄ is
     not in its density, fails. (Whole chains on the banana of ``test_shear`` do not separate the two: over seeds
     0-29, both call 2-3 chains converged with means over 8 MCSE off — the rule's blind spot on a target's
-    unvisited tail, noted on issue 16.)"""
+    unvisited tail.)"""
     for seed in range(5):
         k = {}
         for share in (DEFENSIVE_SHARE, 0.0):

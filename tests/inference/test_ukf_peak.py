@@ -1,4 +1,4 @@
-"""Issue 14, item 2: the UKF's interval holds the output-error likelihood's peak (and, on device tests, the truth).
+"""The UKF's interval holds the output-error likelihood's peak (and, on device tests, the truth).
 
 ``lsq.peak_from`` walks downhill from a given point to the likelihood's local
 peak; the UKF adds its offset δ to the filter's covariance (``UKF.peak_nfev``),

@@ -1,4 +1,4 @@
-"""Issue 14, item 2: the UKF recovers an independent simulation of thesis Table 3.2.
+"""The UKF recovers an independent simulation of thesis Table 3.2.
 
 The record is simulated by scipy's ``solve_ivp``, not by the package
 (``tests/independent_bw.py``), and handed to the engine without its noise

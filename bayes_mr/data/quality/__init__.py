@@ -1,4 +1,4 @@
-"""Quality control of measured records: detect, mask, repair inputs, report (issue 7).
+"""Quality control of measured records: detect, mask, repair inputs, report.
 
 Lab records carry faults that are not errors: a channel clipped at a rail
 value, isolated spikes, implausible jumps, dropouts and flat-lines, and a

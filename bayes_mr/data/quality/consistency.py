@@ -1,4 +1,4 @@
-"""Agreement between a measured displacement and a measured velocity (issue 13).
+"""Agreement between a measured displacement and a measured velocity.
 
 A device test with both channels measured carries a physical check that no
 single-channel statistic has: the velocity integrates to the displacement.

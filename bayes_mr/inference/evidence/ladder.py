@@ -243,14 +243,13 @@ def default_ladder(path: str, n_temps: int | None = None) -> np.ndarray:
 
 
 #: Settings of each temperature's chain: the mean of g with an error bar is all that is needed,
-#: so 10 τ (not 50) and R-hat < 1.1; the MC error is :func:`mean_variance`. Measured on the
-#: analytic evidence of ``tests/test_evidence.py`` (linear LuGre device test): with the rungs'
-#: chains the differential-evolution mixture on 2·d + 2 walkers (until stop 50), over five seeds,
-#: (ln Ẑ − ln Z)/error had mean 0.0 and SD ≈ 1.6 — error bars optimistic by that factor (τ of a
-#: short chain is underestimated); with the reference path's rungs proposing from q alone on the
-#: posterior's 8 independent walkers (``MCMCSettings.moves``), over six seeds, TI's z-scores have
-#: mean 0.15 and SD 0.44, stepping-stone's 0.27 and 0.60 — conservative. The errors are a
-#: hundredth of a nat, far below the differences that decide a selection.
+#: so 10 τ (not 50) and R-hat < 1.1; the MC error is :func:`mean_variance`. On the analytic
+#: evidence of ``tests/inference/test_evidence.py`` (linear LuGre device test), with the reference
+#: path's rungs proposing from q alone on the posterior's 8 independent walkers
+#: (``MCMCSettings.moves``), the z-scores (ln Ẑ − ln Z)/error over six seeds have mean 0.15 and SD
+#: 0.44 (TI), 0.27 and 0.60 (stepping-stone): the error bars are conservative. Rejected: the differential-evolution mixture on 2·d + 2 walkers,
+#: whose error bars were optimistic by a factor ≈ 1.6 (τ of a short chain is underestimated). The
+#: errors are a hundredth of a nat, far below the differences that decide a selection.
 LADDER_SETTINGS = MCMCSettings(min_tau_multiple=10.0, rhat_max=1.1, check_every=50, max_steps=4000)
 
 
@@ -420,8 +419,8 @@ def mean_variance(g: np.ndarray) -> float:
     miss the correlation *between* walkers. The variance is the larger of
     Var(g)·τ/N (per-walker τ) and Var(ḡ_t)·τ_ḡ/n_steps, with ḡ_t the
     ensemble mean at step t (which carries the between-walker part).
-    Measured on the analytic evidence of ``tests/test_evidence.py`` over five
-    seeds: per-walker τ alone gave z-scores of SD ≈ 2.
+    On the analytic evidence of ``tests/inference/test_evidence.py``, per-walker
+    τ alone gives z-scores of SD ≈ 2.
     """
     g = np.asarray(g, float)
     if g.ndim == 1:

@@ -44,8 +44,8 @@ class UKFSettings:
     param_walk : float
         Random-walk intensity of φ [log-units/√s]: Q_φ = param_walk²·h.
         Default 0: the parameters are constants, so the final Gaussian is the
-        filter's posterior given the whole record. A walk (1e-3, this
-        package's default before issue 14) makes the final estimate a
+        filter's posterior given the whole record. A walk (1e-3, as in
+        :meth:`UKFSettings.thesis`) makes the final estimate a
         fading-memory one, weighted to the record's quiet tail: on an
         independent simulation of thesis Table 3.2 it put γ 7–8 % low at
         z ≈ −3.5 and n 2 % low at z ≈ −3 (MSE 234–244 against 219–221
@@ -86,7 +86,7 @@ class UKFSettings:
 
     @classmethod
     def thesis(cls) -> "UKFSettings":
-        """The thesis's filter as this package ran it before issue 14: its sigma points
+        """The thesis's filter as this package reads it: its sigma points
         (α_h = 1e-4, :meth:`MerweScaled.thesis`), a parameter walk of 1e-3 and the best run as is."""
         return cls(points=MerweScaled.thesis(), param_walk=1e-3, refine_passes=0)
 

@@ -222,7 +222,8 @@ def sigma_thetas(free_idx, is_log, scale, phi_lo, phi_hi, m, S, spread, ns, L, T
     ``ED``, scratch of shape :func:`thetas_scratch`), where one C-library
     call each ran one after another: ~45 exponentials per call, twice per
     filter step (normalized-bouc-wen on signal I, batched over 100 priors:
-    1.84 → 1.45 µs per run and sample, one bench run each). The lower
+    1.84 → 1.45 µs per run and sample, ``ukf_us_per_step`` of
+    ``bayes-mr bench``). The lower
     point divides by exp(d) once. A column of the lower-triangular factor
     that is zero in a parameter's row leaves that parameter at the centre's
     value; where m ± d leaves the box the point is clipped and evaluated
