@@ -228,3 +228,73 @@ def coverage_study():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+# --- hidden-effect records of the diagnosis tests ---------------------------------------------
+
+MASS = 50.0  # kg, the thesis's numerical frame (§3.8)
+
+#: Two magnitudes of each effect hidden in a dahl frame (m = 50 kg, c = 100 N·s/m,
+#: k = 20 kN/m, F_d = 25 N, σ = 2500 /m; response ≈ 0.6 mm RMS).
+STRUCTURE_MAGNITUDES = {
+    "force_offset": [0.5, 2.0],                                     # N (F_d = 25 N)
+    "stiffness_drift": [0.005, 0.02],                               # 1/s: 3 % and 12 % over 6 s
+    "asymmetry": [0.1, 0.3],
+    "small_amplitude_regime": [{"r_s": 0.75, "x_s": 2e-4}, {"r_s": 0.5, "x_s": 2e-4}],
+    "low_velocity_rolloff": [5e4, 1.5e4],                           # N·s/m
+    "sensor_delay": [0.004, 0.01],                                  # s: 2 and 5 samples at 500 Hz
+    "cubic_stiffness": [2e9, 8e9],                                  # N/m³: ~5 % and 20 % of k x at 1.5 mm
+    "voltage_dependence": [{"a_v": 0.3, "c_v": 20.0, "eta": 50.0}, {"a_v": 1.0, "c_v": 50.0, "eta": 50.0}],
+}
+DEVICE_MAGNITUDES = {
+    "low_velocity_rolloff": [2e4, 5e3],
+    "voltage_dependence": [{"a_v": 0.3, "c_v": 20.0, "eta": 50.0}, {"a_v": 1.0, "c_v": 50.0, "eta": 50.0}],
+}
+
+
+def switching_voltage(n: int, fs: float, seed: int, high: float = 2.0, mean_hold: float = 0.5) -> np.ndarray:
+    """On/off command voltage [V] with exponentially distributed hold times [s] (like the NEES tests)."""
+    rng = np.random.default_rng(seed + 500)
+    v = np.zeros(n)
+    i, level = 0, 0.0
+    while i < n:
+        hold = max(1, int(rng.exponential(mean_hold) * fs))
+        v[i:i + hold] = level
+        i += hold
+        level = high - level
+    return v
+
+
+def simulated_record(kind="structure", form="dahl", effects=None, *, duration=6.0, fs=500.0, seed=0,
+                     signal="blwn", voltage=False, noise=0.01):
+    """A simulated test of ``form`` with ``effects`` (name → primary value or dict of values) hidden in it."""
+    effects = dict(effects or {})
+    model = get_model(form + "".join("+" + e for e in effects))
+    values = {}
+    for name, v in effects.items():
+        values.update(v if isinstance(v, dict) else {model.effect(name).primary: v})
+    if kind == "structure":
+        sig = {
+            "blwn": lambda: make_signal("blwn", duration=duration, fs=fs, amplitude=3e-3, fmax=10.0, seed=seed),
+            "amp": lambda: make_signal("amp-sweep-up-down", duration=duration, fs=fs, amplitude=0.6e-3, fmax=4.0),
+            "chirp": lambda: make_signal("freq-sweep-up-down", duration=duration, fs=fs, amplitude=0.8e-3, fmax=10.0),
+            "elcentro": lambda: make_signal("elcentro", duration=duration, fs=fs, scale=0.3),
+        }[signal]()
+    else:
+        sig = {
+            "blwn": lambda: make_signal("blwn", duration=duration, fs=fs, amplitude=10e-3, fmax=10.0, seed=seed),
+            "amp": lambda: make_signal("amp-sweep-up-down", duration=duration, fs=fs, amplitude=2e-3, fmax=2.0),
+            "chirp": lambda: make_signal("freq-sweep-up-down", duration=duration, fs=fs, amplitude=2e-3, fmax=5.0),
+        }[signal]()
+    inputs = sig.as_input(kind)
+    if voltage:
+        inputs["voltage"] = switching_voltage(len(sig), fs, seed)
+    return synthesize(model, model.theta(kind, values), sig.time, inputs, mass=MASS if kind == "structure" else None,
+                      noise=noise, seed=seed + 77, source=f"{model.name}-{signal}-{seed}")
+
+
+def effect_case(kind, effect, magnitude, seed):
+    table = STRUCTURE_MAGNITUDES if kind == "structure" else DEVICE_MAGNITUDES
+    return simulated_record(kind, "dahl", {effect: table[effect][magnitude]}, seed=seed,
+                            signal="amp" if effect == "small_amplitude_regime" else "blwn",
+                            voltage=effect == "voltage_dependence")

@@ -18,7 +18,7 @@ from bayes_mr.diagnosis.fits import fit_model
 from bayes_mr.diagnosis.residuals import residual_views
 from bayes_mr.diagnosis.unexplained import AT_FLOOR, BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 from bayes_mr.models import NONE
-from diagnosis.test_diagnose import simulated_record  # tests/ is on the path (pyproject)
+from records import simulated_record
 
 
 def _fitted_ratios(unexp):
