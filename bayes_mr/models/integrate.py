@@ -188,9 +188,9 @@ def _ros2(lay, cst, p, t, h, a0, a1, s, k1, check, work, m):
 
     Returns the largest ratio of a step's error estimate to its tolerance (``check``; 0.0 without): at most 1,
     the steps were taken and ``s`` advanced; above 1, the step that failed ended the trial and ``s`` is back
-    where it was. Not inlined into :func:`advance` (:data:`bayes_mr._compile.specialise.INLINE`): a second inlined copy of ``deriv``
-    there would double the compile of every specialised kernel, and the RK4 loop keeps its own shape (its four
-    stages unrolled: a shared evaluation loop cost the dahl structure step 31 → 41 ns,
+    where it was. Not inlined into :func:`advance` (:data:`bayes_mr._compile.specialise.INLINE`): a second
+    inlined copy of ``deriv`` there would double the compile of every specialised kernel, and the RK4 loop keeps
+    its own shape (its four stages unrolled: a shared evaluation loop cost the dahl structure step 31 → 41 ns,
     :func:`bayes_mr.bench.kernels.simulate_ns_per_step`).
     """
     ns = lay[L_NS]
