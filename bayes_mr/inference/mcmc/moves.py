@@ -68,7 +68,8 @@ PROPOSAL_DF = 20.0
 #: Share and ν of the heavy-tailed component mixed into :class:`Independence`'s q
 #: (``MCMCSettings.defensive_share``): q = 0.8 t₂₀ + 0.2 t₄ bounds p/q by p/(0.2 t₄) wherever the target's
 #: tails outrun t₂₀. On spencer's converged draws it costs little (acceptance 0.61 → 0.56 against t₂₀ alone,
-#: 0.41 with t₄ alone); a share of 0.1 was not enough on the banana (10 450 steps for seed 5).
+#: 0.41 with t₄ alone); with a share of 0.1 the banana of ``tests/inference/test_shear.py`` needs 10 450 steps
+#: on seed 5.
 DEFENSIVE_SHARE = 0.2
 DEFENSIVE_DF = 4.0
 
