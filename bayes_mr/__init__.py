@@ -45,7 +45,7 @@ _PUBLIC = {
     "engine": ("bayes_mr.inference.estimators", "engine"),
     "Posterior": ("bayes_mr.inference.base", "Posterior"),
     "LSQSettings": ("bayes_mr.inference.lsq.least_squares", "LSQSettings"),
-    "MCMCSettings": ("bayes_mr.inference.mcmc.sampler", "MCMCSettings"),
+    "MCMCSettings": ("bayes_mr.inference.mcmc.settings", "MCMCSettings"),
     "UKFSettings": ("bayes_mr.inference.ukf.filter", "UKFSettings"),
     "summary_of": ("bayes_mr.inference.results", "summary_of"),
     "point_of": ("bayes_mr.inference.results", "point_of"),

@@ -44,7 +44,8 @@ from bayes_mr.inference.ukf import filter as ukf
 from bayes_mr.inference.ukf import kernel as K
 from bayes_mr.inference.ukf.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.lsq.least_squares import fit_lsq
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import fit_mcmc
 from bayes_mr.inference.mcmc_posterior import mcmc_posterior
 from bayes_mr.inference.results import build
 from bayes_mr.likelihood.output_error import OutputError

@@ -27,7 +27,9 @@ sys.path[:0] = [str(ROOT / "tests")]
 
 from bayes_mr.inference.evidence.routes import stepping_stone, thermodynamic_integration  # noqa: E402
 from bayes_mr.inference.evidence.ladder import run_ladder  # noqa: E402
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample, start_from_lsq  # noqa: E402
+from bayes_mr.inference.mcmc.settings import MCMCSettings  # noqa: E402
+from bayes_mr.inference.mcmc.sampler import sample  # noqa: E402
+from bayes_mr.inference.mcmc.start import start_from_lsq  # noqa: E402
 from bayes_mr.inference.evidence.tmcmc import Counted, TMCMCSettings, run_tmcmc  # noqa: E402
 
 QUICK = dict(progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)

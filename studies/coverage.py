@@ -40,7 +40,7 @@ import pandas as pd
 from scipy import stats
 
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.report import figures

@@ -102,9 +102,10 @@ def test_fit_takes_the_mcmc_evidence_route_from_the_command_line(tmp_path, monke
     (measured: its 8 independent walkers met the rule after 200, τ 1.8)."""
     from functools import partial
 
-    from bayes_mr.inference.mcmc import sampler as mcmc
+    from bayes_mr.inference.mcmc import settings
 
-    monkeypatch.setattr(mcmc, "MCMCSettings", partial(mcmc.MCMCSettings, max_steps=250))
+    # the estimator reads MCMCSettings from its defining module when it runs
+    monkeypatch.setattr(settings, "MCMCSettings", partial(settings.MCMCSettings, max_steps=250))
     path = tmp_path / "short.csv"
     assert main(["simulate", "--model", "dahl", "--signal", "blwn", "--amplitude", "0.004", "--fmax", "10",
                  "--duration", "3", "--fs", "250", "--mass", "50", "--noise", "0.01", "--seed", "4",

@@ -9,7 +9,7 @@ import pytest
 from bayes_mr.cli.commands import main
 from bayes_mr.selection.comparison import compare, crosscheck, selection_route
 from bayes_mr.inference.identify import UKF, Emcee, Identify
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from records import offset_device_record
 
 FIT_KEYS = {"model", "engine", "params", "params_sd", "log_evidence", "mse", "force_errors", "force_nrmse",

@@ -15,7 +15,7 @@ from bayes_mr.inference import results
 from bayes_mr.cli.commands import main
 from bayes_mr.data import RecordError, load
 from bayes_mr.inference.identify import UKF, Emcee, Identify, LeastSquares, validate
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.likelihood.output_error import OutputError, record_scales
 from bayes_mr.models import get_model
 from bayes_mr.simulation.simulate import synthesize

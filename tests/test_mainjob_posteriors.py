@@ -5,7 +5,7 @@ from dataclasses import replace
 import pytest
 from records import offset_device_record
 
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.run.plan import FULL, QUICK, Budget
 from bayes_mr.run.posteriors import least_squares_pass, posterior_order, run_posteriors
 from bayes_mr.run.warmup import compile_filter_aside, wait

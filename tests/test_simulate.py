@@ -271,3 +271,14 @@ def test_the_compiled_cache_is_keyed_by_every_compiling_source(tmp_path):
     assert _source_key(tmp_path) == key
     (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return 2 * x\n")
     assert _source_key(tmp_path) != key
+
+
+def test_the_compiled_cache_key_reads_the_whole_package():
+    """By default the key hashes every compiling module of bayes_mr (the models' kernels, the UKF's), not only
+    the folder of the module that computes it."""
+    from pathlib import Path
+
+    import bayes_mr
+    from bayes_mr._compile.jit import _source_key
+
+    assert _source_key() == _source_key(Path(bayes_mr.__file__).resolve().parent)

@@ -20,7 +20,7 @@ import xarray as xr
 from records import device_inputs, structure_inputs
 
 from bayes_mr._compile import specialise as S
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.models import get_model
 from bayes_mr.models.drivers import run_batch, run_one
 from bayes_mr.simulation.simulate import Inputs

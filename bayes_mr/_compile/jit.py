@@ -40,7 +40,7 @@ _MARKERS = (b"@hot", b"@driver", b"njit(")
 def _source_key(root: Path | None = None) -> str:
     """Hash of the compiling source files (names and contents) under ``root`` (default: this package)."""
     h = hashlib.sha256()
-    root = Path(__file__).resolve().parent if root is None else Path(root)
+    root = Path(__file__).resolve().parents[1] if root is None else Path(root)
     for f in sorted(root.rglob("*.py")):
         data = f.read_bytes()
         if any(m in data for m in _MARKERS):

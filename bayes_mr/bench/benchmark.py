@@ -244,7 +244,8 @@ def _lsq_then_mcmc(lik: OutputError, seed: int, max_seconds: float | None = None
 
     ``max_seconds``: the chain's wall-time budget (``MCMCSettings.max_seconds``)."""
     from bayes_mr.inference.lsq.least_squares import fit_lsq
-    from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc
+    from bayes_mr.inference.mcmc.settings import MCMCSettings
+    from bayes_mr.inference.mcmc.sampler import fit_mcmc
 
     t0 = _time.perf_counter()
     res = fit_lsq(lik)

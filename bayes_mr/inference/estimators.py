@@ -123,7 +123,9 @@ class Emcee:
         (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.selection.fit_jobs.lsq_mcmc_job`)."""
         from bayes_mr.inference.evidence.routes import evidence_routes, laplace_evidence, tmcmc_evidence
         from bayes_mr.inference.mcmc.wall_time import check_budget
-        from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, start_from_lsq
+        from bayes_mr.inference.mcmc.settings import MCMCSettings
+        from bayes_mr.inference.mcmc.sampler import fit_mcmc
+        from bayes_mr.inference.mcmc.start import start_from_lsq
         from bayes_mr.inference.mcmc_posterior import mcmc_posterior
         from bayes_mr.inference.evidence.tmcmc import TMCMCSettings, run_tmcmc
 

@@ -7,11 +7,11 @@ import xarray as xr
 
 from bayes_mr.inference.base import Posterior, even_indices
 from bayes_mr.inference.calibrate import adjust_draws, describe, loewner_max, truncate_to_box
-from bayes_mr.inference.mcmc.checkpoint import seed_of
+from bayes_mr.inference.mcmc.start import seed_of
 from bayes_mr.inference.evidence.routes import Evidence, select_route
 from bayes_mr.inference.lsq.evidence_scale import calibration_info
 from bayes_mr.inference.mcmc.geometry import chain_geometry
-from bayes_mr.inference.mcmc.sampler import MCMCResult
+from bayes_mr.inference.mcmc.chain import MCMCResult
 
 
 def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_draws: int = 200) -> Posterior:

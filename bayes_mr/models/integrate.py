@@ -28,7 +28,8 @@ per interval (h·λ ≤ c_acc, at most n_max). :func:`advance` integrates the in
   m·(ns + 2), than RK4's 4·n_sub; else, or where that fails too, the interval is integrated with RK4.
   On the packaged damper's bouc-wen optimum at 1 kHz the retry took 79 % of the intervals by ROS2
   instead of 49 % and halved the simulation's cost (9.2 → 4.5 ms; RK4 alone 18 ms) at the same error
-  against a fine RK4 reference (5.9e-4 → 6.0e-4 of the SD; measured).
+  against a fine RK4 reference (5.9e-4 → 6.0e-4 of the SD; ``tests/test_integrate.py`` checks the accuracy,
+  ``bayes_mr.bench`` times the simulation).
 
 Why device tests only: there every state is a driven hysteretic or lag state and the test reads them
 all. In a structure test the stiff state couples into the frame (ẍ depends on z, ż on ẋ), whose
@@ -53,9 +54,8 @@ import math
 
 from bayes_mr._compile.jit import hot
 from bayes_mr.models.kernel import (
-    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, deriv, deriv_pow,
+    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, coil_step, deriv, deriv_pow,
 )
-from bayes_mr.models.kernel_effects import _coil_step
 from bayes_mr.models.power import point_powers
 
 #: γ of ROS2 (Verwer et al. 1999): 1 + 1/√2, the root that makes the method L-stable.
@@ -135,7 +135,7 @@ def _solve(work, ns, b):
 def _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs):
     """The discrete updates between sub-steps: the coil's exact lag and the amplitude envelope."""
     if lay[L_FD] >= 0:
-        _coil_step(lay, p, s, a0[2] + (j * inv_n) * (a1[2] - a0[2]), am[2], hs)
+        coil_step(lay, p, s, a0[2] + (j * inv_n) * (a1[2] - a0[2]), am[2], hs)
     if lay[L_SA] >= 0:
         # amplitude envelope: follows peaks at once, decays with time constant T_env
         ie = lay[L_SE]
@@ -188,9 +188,10 @@ def _ros2(lay, cst, p, t, h, a0, a1, s, k1, check, work, m):
 
     Returns the largest ratio of a step's error estimate to its tolerance (``check``; 0.0 without): at most 1,
     the steps were taken and ``s`` advanced; above 1, the step that failed ended the trial and ``s`` is back
-    where it was. Not inlined into :func:`advance` (``_specialise.INLINE``): a second inlined copy of ``deriv``
-    there would double the compile of every specialised kernel, and the RK4 loop keeps its own shape (its four
-    stages unrolled: a shared evaluation loop cost the dahl structure step 31 → 41 ns, measured).
+    where it was. Not inlined into :func:`advance` (:data:`bayes_mr._compile.specialise.INLINE`): a second
+    inlined copy of ``deriv`` there would double the compile of every specialised kernel, and the RK4 loop keeps
+    its own shape (its four stages unrolled: a shared evaluation loop cost the dahl structure step 31 → 41 ns,
+    :func:`bayes_mr.bench.kernels.simulate_ns_per_step`).
     """
     ns = lay[L_NS]
     kr = work[1]  # ROS2's k₁ (solved in place), the caller's k1 kept for RK4

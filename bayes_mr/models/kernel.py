@@ -25,10 +25,6 @@ from __future__ import annotations
 import math
 
 from bayes_mr._compile.jit import hot
-from bayes_mr.models.kernel_effects import (
-    K_SMOOTH, L_CSAT, L_FD, L_FDEC, L_SC, L_SF, L_ST, _fluid_friction, _fluid_slope, _lag_bound, _lag_rate,
-    _saturate, _sgn,
-)
 from bayes_mr.models.term_kernel import TERM_LAW, term_basis
 
 # --- form codes -------------------------------------------------------------
@@ -58,9 +54,12 @@ L_NP = 15  # number of parameters
 L_MASS = 16  # forced test: index in p of the mass m [kg]
 L_OBS = 17  # codes (OBS_*) of the measured channels, L_OBS..L_OBS+N_OBS-1, -1 = unused
 N_OBS = 3
-# issue-15 effects (slots L_CSAT..L_SF, constant K_SMOOTH) live in kernel_effects, after the
-# measured-channel block so the older slots keep their indices
-assert L_CSAT == L_OBS + N_OBS, "kernel_effects' slots must follow the measured-channel block"
+L_CSAT = 20  # command_saturation: u_s
+L_FD = 21  # field_dynamics: tau_c
+L_SC = 22  # state index of the coil current (field_dynamics)
+L_ST = 23  # shear_thinning: c_p, m_hb, v_p
+L_SF = 24  # stribeck_friction: F_st, v_s
+L_FDEC = 25  # field_decay: r_d
 # library terms (bayes_mr.models.terms): up to N_TERMS terms θ_j·b_j, b_j chosen by a code
 L_TP = L_FDEC + 1  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unused
 N_TERMS = 3
@@ -73,13 +72,96 @@ K_MASS = 0  # storey mass [kg] (structure tests)
 K_TENV = 1  # amplitude-envelope decay time [s]
 K_CACC = 2  # accuracy bound h·λ ≤ c_acc for choosing RK4 sub-steps
 K_NMAX = 3  # most sub-steps per sample
-assert K_SMOOTH == 4, "kernel_effects' constant must follow the step-control constants"
-K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the step control: the divisions by
-#              the mass, by c_acc and by n_sub cost the specialised dahl structure step 66 -> 35 ns per sample
-#              (measured; the step-control divisions sat between a sample's state and its first RK4 stage)
+K_SMOOTH = 4  # stribeck_friction: width of the smoothed sgn ẋ relative to v_s
+K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the step control: divisions by the
+#              mass, c_acc and n_sub made the specialised dahl structure step 66 ns per sample against 35
+#              (bayes_mr.bench.kernels.simulate_ns_per_step)
 K_STIFF = 6  # RK4 sub-steps per interval above which the interval is tried with ROS2 (models.integrate)
 K_RTOL = 7  # relative error a ROS2 interval may have, else it is taken by RK4
 CONST_SIZE = 8
+
+
+# --- effects: the command's saturation and lags, velocity-only friction ------------
+@hot(inline="always")
+def _sgn(v):
+    if v > 0.0:
+        return 1.0
+    if v < 0.0:
+        return -1.0
+    return 0.0
+
+
+@hot(inline="always")
+def _saturate(lay, p, u):
+    """The command as the field-dependent coefficients see it: u_s·tanh(u/u_s) with command_saturation, else u."""
+    if lay[L_CSAT] < 0:
+        return u
+    us = p[lay[L_CSAT]]
+    return us * math.tanh(u / us)
+
+
+@hot(inline="always")
+def _fluid_friction(lay, cst, p, xd):
+    """Velocity-only damper forces [N]: shear_thinning and stribeck_friction (0 when off)."""
+    f = 0.0
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        cp, mh, vp = p[j], p[j + 1], p[j + 2]
+        # Herschel–Bulkley power law |ẋ|^m above v_p, slope c_p at rest (regularised)
+        f += cp * vp * _sgn(xd) * (math.pow(1.0 + abs(xd) / vp, mh) - 1.0) / mh
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        r = xd / p[j + 1]
+        rr = r * r
+        if rr < 700.0:
+            f += p[j] * math.exp(-rr) * math.tanh(r / cst[K_SMOOTH])
+    return f
+
+
+@hot(inline="always")
+def _fluid_slope(lay, cst, p, vmax):
+    """Upper bound of d(_fluid_friction)/dẋ [N·s/m] for |ẋ| ≤ vmax (the rate of structure tests)."""
+    slope = 0.0
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        slope += p[j] * max(1.0, math.pow(1.0 + vmax / p[j + 2], p[j + 1] - 1.0))
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        slope += abs(p[j]) / (cst[K_SMOOTH] * p[j + 1])
+    return slope
+
+
+@hot(inline="always")
+def coil_step(lay, p, s, v0, v1, hs):
+    """Advance the coil's lag d = i − v over a sub-step, exact for a command linear from v0 to v1.
+
+    With i̇ = (v − i)/τ_c, d obeys ḋ = −d/τ_c − v̇, so d(hs) = −τ·v̇ + (d0 + τ·v̇)·e^{−hs/τ},
+    v̇ = (v1 − v0)/hs: stable for any τ_c, and d → 0 (the one-lag model) as τ_c → 0.
+    The field lags read i = v(t) + d with d held over the sub-step (``deriv`` sets its
+    rate to 0), as the amplitude envelope is updated between sub-steps.
+    """
+    ic = lay[L_SC]
+    tau = p[lay[L_FD]]
+    vd = (v1 - v0) / hs
+    e = math.exp(-hs / tau) if hs < 700.0 * tau else 0.0
+    s[ic] = -tau * vd + (s[ic] + tau * vd) * e
+
+
+@hot(inline="always")
+def _lag_rate(lay, p, eta, v, u):
+    """Rate u̇ [V/s] of a command-to-field lag of rate η driven by v: η·(v − u), and with
+    field_decay r_d·η·(v − u) while the field's magnitude falls (|v| < |u|)."""
+    if lay[L_FDEC] >= 0 and abs(v) < abs(u):
+        return eta * p[lay[L_FDEC]] * (v - u)
+    return eta * (v - u)
+
+
+@hot(inline="always")
+def _lag_bound(lay, p, eta):
+    """Upper bound of a field lag's rate [1/s] (η, or η·max(1, r_d) with field_decay)."""
+    if lay[L_FDEC] >= 0:
+        return abs(eta) * max(1.0, p[lay[L_FDEC]])
+    return abs(eta)
 
 
 @hot(inline="always")

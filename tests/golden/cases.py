@@ -41,7 +41,7 @@ CASES = {
 
 def estimator(engine: str):
     import bayes_mr.inference.identify as ident
-    from bayes_mr.inference.mcmc.sampler import MCMCSettings
+    from bayes_mr.inference.mcmc.settings import MCMCSettings
 
     if engine == "lsq":
         return ident.LeastSquares()

@@ -14,7 +14,8 @@ from bayes_mr.inference.evidence.routes import (
 )
 from bayes_mr.inference.evidence.ladder import BoxTarget, run_ladder
 from bayes_mr.inference.lsq.least_squares import fit_lsq
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, sample
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import fit_mcmc, sample
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulation.simulate import simulate

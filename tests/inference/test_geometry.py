@@ -3,7 +3,8 @@
 import numpy as np
 
 from bayes_mr.inference.mcmc.geometry import RIDGE_CORRELATION, SPREAD_FRACTION, chain_geometry
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import sample
 
 NAMES = ("a", "b", "c", "d")
 LOWER, UPPER = np.full(4, -10.0), np.full(4, 10.0)

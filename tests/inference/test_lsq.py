@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from bayes_mr.data.schema import make_record
-from bayes_mr.inference.lsq.least_squares import LinearSubfit, LSQSettings, fit_lsq, linear_names
+from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+from bayes_mr.inference.lsq.subfit import LinearSubfit, linear_names
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulation.simulate import simulate

@@ -8,8 +8,9 @@ import pytest
 from bayes_mr.inference.ukf.crosscheck import ukf_vs_mcmc
 from bayes_mr.inference.mcmc_posterior import mcmc_posterior
 from bayes_mr.numerics.stats import integrated_times
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, fit_mcmc, sample
-from bayes_mr.inference.mcmc.walkers import initial_walkers, reflect_into
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import fit_mcmc, sample
+from bayes_mr.inference.mcmc.start import initial_walkers, reflect_into
 
 
 def correlated_gaussian(d, seed):
@@ -112,9 +113,9 @@ def test_adaptation_rounds_refit_a_proposal_the_pilot_left_too_narrow(monkeypatc
     Measured (seeds 0-2): the first round accepts 0.46-0.48, which ends the adaptation by default (τ 3.1-3.6,
     350-400 steps to the rule against 5.3-7.2 and 550-900 frozen); with the rounds made to go on, the second
     accepts 0.53-0.56 — here they do, so that the refit itself is what is tested."""
-    from bayes_mr.inference.mcmc import sampler as mcmc
+    from bayes_mr.inference.mcmc import adapt
 
-    monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
+    monkeypatch.setattr(adapt, "ADAPT_ACCEPT", 0.9)
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
     adapted = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False))
     frozen = sample(log_prob, mu, C / 400, MCMCSettings(seed=0, progress=False, adapt_rounds=0))
@@ -136,15 +137,15 @@ def test_rounds_that_stall_below_the_floor_have_not_settled(monkeypatch):
     ``ADAPT_GAIN``): above ``ADAPT_FLOOR`` that ends the adaptation and the chain proposes from q alone on 8
     walkers. With the floor raised above where they stall the same stall is a poor q, not a settled one: every
     round runs, and the chain keeps the rounds' mixture on 2·d + 2 walkers — and is still exact."""
-    from bayes_mr.inference.mcmc import sampler as mcmc
+    from bayes_mr.inference.mcmc import adapt
 
-    monkeypatch.setattr(mcmc, "ADAPT_ACCEPT", 0.9)
+    monkeypatch.setattr(adapt, "ADAPT_ACCEPT", 0.9)
     mu, C, P, log_prob = correlated_gaussian(12, seed=7)
     settings = MCMCSettings(seed=0, progress=False, adapt_rounds=4)
     stalled = sample(log_prob, mu, C / 400, settings)
     assert len(stalled.adapt_acceptance) < 4 and stalled.n_walkers == 8, stalled.adapt_acceptance
-    assert mcmc.ADAPT_FLOOR < stalled.adapt_acceptance[-1] < mcmc.ADAPT_GAIN * stalled.adapt_acceptance[-2]
-    monkeypatch.setattr(mcmc, "ADAPT_FLOOR", 0.9)
+    assert adapt.ADAPT_FLOOR < stalled.adapt_acceptance[-1] < adapt.ADAPT_GAIN * stalled.adapt_acceptance[-2]
+    monkeypatch.setattr(adapt, "ADAPT_FLOOR", 0.9)
     poor = sample(log_prob, mu, C / 400, settings)
     assert len(poor.adapt_acceptance) == 4 and poor.n_walkers == 2 * 12 + 2, poor.adapt_acceptance
     assert poor.converged and np.all(np.abs((poor.mean() - mu) / poor.mcse()) < 3.3)

@@ -16,7 +16,7 @@ import pytest
 from bayes_mr.inference import results
 from bayes_mr.inference.identify import Identify
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares
-from bayes_mr.inference.mcmc.sampler import MCMCSettings
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.models import get_model
 from bayes_mr.simulation.simulate import Inputs, simulate, synthesize
 

@@ -2,7 +2,9 @@
 
 import numpy as np
 
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+
+from bayes_mr.inference.mcmc.sampler import sample
 from bayes_mr.inference.mcmc.proposal import ProposalMap, fit_margins, fit_proposal, margin_forward, margin_inverse
 
 LOWER, UPPER = np.array([0.0, -2.0]), np.array([1.0, 3.0])

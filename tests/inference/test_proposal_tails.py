@@ -7,7 +7,8 @@ import pytest
 from scipy import stats
 
 from bayes_mr.inference.mcmc.convergence import TAIL_MIN_DRAWS, tail_bound, tail_index
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import sample
 from bayes_mr.inference.mcmc.moves import DEFENSIVE_DF, DEFENSIVE_SHARE, PROPOSAL_DF, Independence
 from inference.test_shear import B, log_banana
 

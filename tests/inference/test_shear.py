@@ -2,7 +2,9 @@
 
 import numpy as np
 
-from bayes_mr.inference.mcmc.sampler import MCMCSettings, sample
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+
+from bayes_mr.inference.mcmc.sampler import sample
 from bayes_mr.inference.mcmc.moves import Independence
 from bayes_mr.inference.mcmc.proposal import SHEAR_MIN_GAIN, fit_proposal, fit_shear, sheared, unsheared
 

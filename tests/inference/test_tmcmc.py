@@ -116,7 +116,7 @@ def test_the_eve_variance_of_one_stage_is_the_importance_sampling_variance():
 def test_the_opt_in_route_on_an_output_error_posterior_matches_the_analytic_evidence():
     """``Emcee(evidence="tmcmc")``: TMCMC from the posterior's reference q selects, Laplace beside it."""
     from bayes_mr.inference.estimators import Emcee
-    from bayes_mr.inference.mcmc.sampler import MCMCSettings
+    from bayes_mr.inference.mcmc.settings import MCMCSettings
 
     lik, log_z, _ = linear_device_problem()
     settings = MCMCSettings(seed=0, progress=False, min_tau_multiple=20.0, rhat_max=1.05, check_every=100)

@@ -41,7 +41,9 @@ import numpy as np
 from bayes_mr.execution.executor import run_jobs, share
 from bayes_mr.numerics.stats import integrated_times
 from bayes_mr.numerics.synthetic_noise import as_seed_sequence
-from bayes_mr.inference.mcmc.sampler import MCMCResult, MCMCSettings, sample
+from bayes_mr.inference.mcmc.chain import MCMCResult
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.sampler import sample
 from bayes_mr.inference.mcmc.moves import local_moves
 
 

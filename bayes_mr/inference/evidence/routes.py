@@ -65,7 +65,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 from bayes_mr.inference.evidence.ladder import LADDER_SETTINGS, Ladder, mean_variance, run_ladder
-from bayes_mr.inference.mcmc.sampler import MCMCResult, MCMCSettings
+from bayes_mr.inference.mcmc.chain import MCMCResult
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.inference.evidence.tmcmc import TMCMCResult, TMCMCSettings, run_tmcmc
 
 #: Routes in order of preference for model selection (``tmcmc`` only where asked for, without TI).

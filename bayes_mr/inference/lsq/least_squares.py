@@ -19,7 +19,7 @@
    estimate, its covariance and evidence are still the whole record's.
    While racing, simulations get at most ``search_substeps`` RK4
    sub-steps per sample interval, and a candidate or start whose simulation
-   saturates that cap on more than :data:`STIFF_FRACTION` of the intervals is rejected as a start (its dynamics
+   saturates that cap on more than :data:`~.subfit.STIFF_FRACTION` of the intervals is rejected as a start (its dynamics
    are far faster than the sampling resolves; simulating it with the kernel's 400 sub-steps costs 30–90 s per
    evaluation on the Bouc–Wen benchmark). Only the final refinement simulates with the full sub-step range.
 3. **Laplace approximation** at the optimum: Cov(φ) = (JᵀJ)⁻¹ with J the
@@ -66,10 +66,9 @@ from bayes_mr.inference import calibrate
 from bayes_mr.inference.lsq import evidence_scale
 from bayes_mr.inference.calibrate import hac_covariance
 from bayes_mr.inference.lsq.refine import Residuals, refine, standardised
-from bayes_mr.inference.lsq.subfit import STIFF_FRACTION, LinearSubfit, candidates, linear_names, screen
+from bayes_mr.inference.lsq.subfit import screen
 
-__all__ = ["STIFF_FRACTION", "LSQResult", "LSQSettings", "LinearSubfit", "candidates", "fit_lsq", "hac_covariance",
-           "laplace", "linear_names"]
+__all__ = ["LSQResult", "LSQSettings", "WHITE_P", "fit_lsq", "laplace", "peak_from", "posterior_log_volume"]
 
 #: Ljung–Box p-value above which a whitened residual counts as white (no HAC sandwich needed).
 WHITE_P = 0.01
@@ -99,7 +98,7 @@ class LSQSettings:
     search_substeps : int or None
         Most RK4 sub-steps per sample interval while a long record's starts
         are screened and raced on its head; a parameter set saturating it on
-        more than :data:`STIFF_FRACTION` of the intervals is rejected as a
+        more than :data:`~.subfit.STIFF_FRACTION` of the intervals is rejected as a
         start (None: the kernel's own maximum, nothing rejected).
     input_noise_replicas : int
         Replicas of the response to the input's noise in the covariance's

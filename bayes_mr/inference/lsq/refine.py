@@ -86,11 +86,11 @@ class Residuals:
 #: Relative cost tolerance of the trust-region refinement: it stops after an accepted step that lowers
 #: ½Σr² by less than FTOL of itself. The cost of standardised residuals is about half their number, so this is
 #: ~1.5e-6 in log-likelihood on a 30-s, 1-kHz, two-channel record (3e4) and 5e-5 on 1e6 residuals — far below
-#: any difference the package reports or decides on. Measured on the bench's diagnose (70 refinements): with
-#: 1e-12, 36 % of the simulations were spent after the cost was within 1e-10 of its final value (the last two
-#: or three accepted steps lower it by ~1e-9 relative, then the trust region shrinks to ``xtol``); 1e-10 saved
-#: a sixth of them there (diagnose 15.7 → 14.8 s). An earlier round tried 1e-8 and the small-amplitude test
-#: record's diagnosis named the wrong cause; at 1e-10 the suite's hidden-effect tests all hold.
+#: any difference the package reports or decides on. On the bench's diagnose (``bayes-mr bench``, 70
+#: refinements) 1e-12 spent 36 % of the simulations after the cost was within 1e-10 of its final value (the last
+#: accepted steps lower it by ~1e-9 relative, then the trust region shrinks to ``xtol``). At 1e-8 the
+#: small-amplitude record's diagnosis names the wrong cause; at 1e-10 the hidden-effect tests of
+#: ``tests/diagnosis/test_diagnose.py`` hold.
 FTOL = 1e-10
 
 

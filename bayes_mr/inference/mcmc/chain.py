@@ -1,10 +1,27 @@
-"""The result of an emcee run (:func:`bayes_mr.inference.mcmc.sampler.sample`): the chain and its diagnostics."""
+"""Running the chain: an emcee ensemble with its HDF5 checkpoint, advanced until the stopping rule, and its result.
+
+:func:`run_chain` draws from a vectorised log-density ``f(X (B, d)) -> (B,)`` with
+:class:`emcee.EnsembleSampler` (``vectorize=True``: every proposal of a half-ensemble is one call, so one
+compiled batched simulation serves all walkers) and fixed moves, from walkers of :mod:`.start`, until the rule
+of :mod:`.convergence` holds. The checkpoint (emcee's ``HDFBackend``) stores the chain and the moves' random
+state after every step, and the seed's entropy and the settings as attributes of its group, so a resumed run is
+checked against the seed it continues and equals the uninterrupted run bit for bit.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+import time as _time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
+import emcee
 import numpy as np
+
+from bayes_mr.inference.mcmc.convergence import run_until_converged, tail_index
+from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.inference.mcmc.start import LogDensity, run_seeds, start_walkers
 
 
 @dataclass
@@ -46,7 +63,7 @@ class MCMCResult:
         Steps run before this chain to fit the independence proposal: the
         pilot and the adaptation rounds (0: none); they are not in ``chain``.
     adapt_acceptance : tuple of float
-        Mean acceptance of each adaptation round (:func:`bayes_mr.inference.mcmc.sampler.sample`).
+        Mean acceptance of each adaptation round (:mod:`bayes_mr.inference.mcmc.adapt`).
     projection : dict or None
         With ``stopped == "projected"``: ``tau_max``, ``steps_needed``,
         ``seconds_needed`` and ``budget_s``
@@ -100,3 +117,96 @@ class MCMCResult:
         """Monte Carlo standard error of the posterior mean, SD/√ESS (d,)."""
         sd = self.chain[self.burn:].reshape(-1, self.chain.shape[-1]).std(axis=0, ddof=1)
         return sd / np.sqrt(self.ess)
+
+
+def open_backend(settings, group: str, shape: tuple[int, int], entropy: str) -> tuple[object | None, bool]:
+    """The run's HDF5 backend, and whether it resumes a stored chain.
+
+    Parameters
+    ----------
+    settings : MCMCSettings
+        Its ``backend`` (file, or None for memory only) and ``resume``.
+    group : str
+        HDF5 group of the chain inside the file.
+    shape : (int, int)
+        (walkers, dimension) of this run.
+    entropy : str
+        Seed entropy of this run (:func:`.start.run_seeds`).
+
+    Returns
+    -------
+    backend : emcee.backends.HDFBackend or None
+    resuming : bool
+        True when ``settings.resume`` and the group holds a chain; else the
+        group is reset and stamped with the seed entropy and settings.
+
+    Raises
+    ------
+    ValueError
+        If the stored chain was made with another seed or another shape.
+    """
+    if settings.backend is None:
+        return None, False
+    backend = emcee.backends.HDFBackend(str(settings.backend), name=group)
+    if settings.resume and backend.initialized and backend.iteration > 0:
+        with backend.open() as f:
+            stored = f[group].attrs.get("bayes_mr_seed_entropy")
+        if stored is not None and str(stored) != entropy:
+            raise ValueError(f"{settings.backend}[{group}]: checkpoint was made with seed entropy {stored}, "
+                             f"not {entropy}; resume with the same seed or start afresh (resume=False)")
+        if backend.shape != shape:
+            raise ValueError(f"{settings.backend}[{group}]: checkpoint holds {backend.shape} (walkers, dim), "
+                             f"this run needs {shape}")
+        return backend, True
+    Path(settings.backend).parent.mkdir(parents=True, exist_ok=True)
+    backend.reset(*shape)
+    with backend.open("a") as f:
+        f[group].attrs["bayes_mr_seed_entropy"] = entropy
+        f[group].attrs["bayes_mr_settings"] = json.dumps({**asdict(settings), "seed": entropy}, default=str)
+    return backend, False
+
+
+def run_chain(
+    log_prob: LogDensity,
+    x0_center: np.ndarray,
+    x0_cov: np.ndarray,
+    settings: MCMCSettings,
+    names: Sequence[str],
+    *,
+    initial: np.ndarray | None = None,
+    group: str = "mcmc",
+    proposal: tuple | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> MCMCResult:
+    """One chain of ``settings.moves`` (no pilot: a move that needs a proposal is given ``proposal``) until the
+    stopping rule, ``max_steps`` or ``max_seconds``; arguments as :func:`~bayes_mr.inference.mcmc.sampler.sample`'s.
+
+    With ``settings.resume`` and a checkpoint the chain continues from its last stored step and random state.
+    """
+    t0 = _time.perf_counter()
+    d = x0_center.size
+    n_walkers = settings.walkers(d) if initial is None else int(np.shape(initial)[0])
+    init_rng, move_state, entropy = run_seeds(settings.seed)
+    backend, resuming = open_backend(settings, group, (n_walkers, d), entropy)
+    moves = settings.make_moves(proposal)
+    # a chain of the independence move alone is also checked on its proposals' importance weights
+    tail = None if settings.ensemble else (lambda: tail_index(moves[0][0].log_weights))
+    sampler = emcee.EnsembleSampler(n_walkers, d, log_prob, moves=moves, backend=backend, vectorize=True)
+    if resuming:
+        state = sampler.backend.get_last_sample()  # carries the stored random state
+    else:
+        coords, lp0 = start_walkers(log_prob, x0_center, x0_cov, n_walkers, init_rng, initial, bounds)
+        state = emcee.State(coords, log_prob=lp0, random_state=move_state)
+    diag, history = run_until_converged(sampler, state, settings, resuming, tail)
+    tau = diag["tau"]
+    return MCMCResult(
+        chain=np.array(sampler.get_chain()),
+        log_prob=np.array(sampler.get_log_prob()),
+        burn=int(diag["burn"]),
+        thin=max(1, int(0.5 * float(np.min(tau)))) if np.all(np.isfinite(tau)) else 1,
+        tau=tau, rhat=diag["rhat"], ess=diag["ess"],
+        acceptance=np.array(sampler.acceptance_fraction),
+        converged=bool(diag["converged"]), stopped=diag["stopped"],
+        wall_s=_time.perf_counter() - t0, seed_entropy=entropy, names=tuple(names), history=history,
+        projection=diag.get("projection"), pareto_k=float(diag.get("pareto_k", np.nan)),
+    )

@@ -1,8 +1,8 @@
 """Convergence of an ensemble chain: burn-in, integrated times, R-hat, ESS and the verdict.
 
-The rule (see :mod:`bayes_mr.inference.mcmc.sampler`): a pilot τ₀ from the second
-half of the chain, burn-in ⌈``burn_tau_multiple`` · τ₀⌉ (at most half), and
-converged when the chain after burn-in is ``min_tau_multiple`` times its
+The rule: a pilot τ₀, the longest integrated time of the chain's second half (the start-up
+transient lives in the first half once the chain is a few τ long); burn-in
+⌈``burn_tau_multiple`` · τ₀⌉ (at most half); and converged when the chain after burn-in is ``min_tau_multiple`` times its
 longest integrated time *and* every coordinate's rank-normalised split R-hat
 (walkers as chains) is below ``rhat_max``. :func:`run_until_converged` drives
 a sampler by that rule, within ``max_steps`` and an optional wall-time budget;

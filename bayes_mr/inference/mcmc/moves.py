@@ -55,29 +55,21 @@ def jittered_cholesky(cov) -> np.ndarray:
         return np.linalg.cholesky((u * np.maximum(w, jitter)) @ u.T + jitter * np.eye(d))
 
 
-#: Degrees of freedom ν of :class:`Independence`'s main t (:class:`~bayes_mr.inference.mcmc.sampler.MCMCSettings`'s
+#: Degrees of freedom ν of :class:`Independence`'s main t (:class:`~bayes_mr.inference.mcmc.settings.MCMCSettings`'s
 #: ``proposal_df``). The scale matrix is the draws' covariance whatever ν, so a t with small ν is wider than
-#: them (covariance Σ·ν/(ν − 2): twice at ν = 4) and spends proposals in the tails. Measured on the packaged
-#: damper (main job's part A): a proposal fitted to 3000 draws of a converged chain's second half accepts, at
-#: ν = 4, 10, 20, 50, 0.41, 0.55, 0.60, 0.63 of the time on spencer's posterior, 0.44, 0.49, 0.51, 0.53 on
-#: bouc-wen's, 0.61, 0.76, 0.80, 0.83 on normalized-bouc-wen's (1120 proposals against 3000 held-out
-#: draws; scaling Σ by (ν − 2)/ν to match covariances was no better). In the sampler (pilot, rounds and
-#: chain, seeds 0 and 1) t₂₀ alone took dahl from 400, 400 to 300, 200 steps (τ 2.4–3.2 → 1.7–2.5), lugre from
-#: 400, 450 to 250, 350, normalized-bouc-wen from 350, 500 to 550, 450, spencer (seed 0) from 2100 to 1250.
-#: But where the target's tails outrun q's and no map straightens them, a light-tailed q sticks: on the
-#: banana of ``tests/inference/test_shear.py`` t₂₀ alone needed 2250, > 20 000 and 2300 steps (seeds 4-6;
-#: τ up to 405) where t₄ needed 500, 2650, 1150. Hence the defensive mixture below (Hesterberg 1995): with
-#: it, 1100, 850, 1350 steps there, and spencer's chain accepted 0.38 and converged after 900 steps
-#: (τ 5.6–7.6; t₄ alone: 2100, τ 7–11). Those with the DE mixture in the chain and on seeds picked on another
-#: CPU; with the independence move alone (the chain since stop 51), seeds 0-29 on this machine's, the banana
-#: does not separate the two: both call 2-3 of 30 chains converged with a mean over 8 MCSE off. What the t₄
-#: does for certain is bound the weights p/q where p's tails outrun t₂₀'s: Pareto k 1/4 against 17/20 for a
-#: t₃ target (``tests/inference/test_proposal_tails.py``).
+#: them (covariance Σ·ν/(ν − 2): twice at ν = 4) and spends proposals in the tails. On the main job's posteriors
+#: of the packaged damper's part A a proposal fitted to a converged chain's draws accepts, at ν = 4 and 20,
+#: 0.41 and 0.60 of the time on spencer's, 0.44 and 0.51 on bouc-wen's, 0.61 and 0.80 on normalized-bouc-wen's,
+#: and its chains need fewer steps. A light-tailed q alone sticks where the target's tails outrun it (the banana
+#: of ``tests/inference/test_shear.py``), hence the defensive t₄ share below (Hesterberg 1995), which bounds the
+#: weights p/q where p's tails outrun t₂₀'s: Pareto k 1/4 against 17/20 for a t₃ target
+#: (``tests/inference/test_proposal_tails.py``).
 PROPOSAL_DF = 20.0
 #: Share and ν of the heavy-tailed component mixed into :class:`Independence`'s q
 #: (``MCMCSettings.defensive_share``): q = 0.8 t₂₀ + 0.2 t₄ bounds p/q by p/(0.2 t₄) wherever the target's
 #: tails outrun t₂₀. On spencer's converged draws it costs little (acceptance 0.61 → 0.56 against t₂₀ alone,
-#: 0.41 with t₄ alone); a share of 0.1 was not enough on the banana (10 450 steps for seed 5).
+#: 0.41 with t₄ alone); with a share of 0.1 the banana of ``tests/inference/test_shear.py`` needs 10 450 steps
+#: on seed 5.
 DEFENSIVE_SHARE = 0.2
 DEFENSIVE_DF = 4.0
 
@@ -88,7 +80,7 @@ class Independence(emcee.moves.MHMove):
     Every walker proposes x' ~ q whatever its position, and accepts
     with min(1, p(x') q(x) / (p(x) q(x'))): the chain is exact for any fixed
     q, and when q is close to the target (fitted to a pilot
-    chain of it, :func:`bayes_mr.inference.mcmc.sampler.sample`) a proposal is accepted often and lands
+    chain of it, :mod:`bayes_mr.inference.mcmc.adapt`) a proposal is accepted often and lands
     anywhere in the posterior, so successive positions are nearly
     independent — an integrated time of a few steps where the local
     differential-evolution moves need tens. Where q is a poor fit (a curved
@@ -101,13 +93,9 @@ class Independence(emcee.moves.MHMove):
     (:func:`~bayes_mr.inference.mcmc.proposal.fit_proposal`): a coordinate piled against a bound of the prior box in
     log-distance to it, a non-Gaussian marginal mapped onto the normal through its quantiles, a curved ridge
     (a banana: spencer's γ moves with n and n² on the packaged damper) straightened by a shear; q(x) carries
-    the map's Jacobian. Measured on spencer's posterior (main job's part A, seed 0, unbudgeted, 56 walkers):
-    with the shear the chain converged after 1800 steps (τ 10–15, R-hat < 1.01; acceptance 0.27) where
-    without it 2500 steps had not (τ 20–26, 37–43 for γ, β, n; R-hat 1.03; acceptance 0.22); with the
-    marginal maps too, τ 7–8 (β 11) and the last adaptation round accepted 0.31, but R-hat < 1.01 held only
-    after 2100 steps (β's was the last to pass). With 30 walkers (shear only) τ was 41–62 after 3000 steps:
-    the rounds' fits from fewer draws accepted 0.09–0.14. All of these with t₄ alone; with the mixture
-    spencer's chain accepted 0.38 and converged after 900 steps (τ 5.6–7.6).
+    the map's Jacobian. On spencer's posterior (the main job's part A) the shear took τ from 20–26 to 10–15
+    and the marginal maps to 7–8 (``tests/inference/test_shear.py`` and
+    ``tests/inference/test_proposal_margins.py`` test each on a target made for it).
 
     Given the box (the map's ``box``), proposals are drawn from q *restricted to it*:
     a draw outside is drawn again (up to :data:`REDRAWS` times). The

@@ -22,8 +22,9 @@ from scipy import stats
 
 #: A pilot's marginal whose mean is closer than this many of its SDs to a bound of the box may be proposed in
 #: log-distance to it (:class:`ProposalMap`), where that fits the pilot better (:func:`fit_proposal`).
-#: Measured on normalized-bouc-wen's posterior on the bench's compare record (n's marginal: mean ≈ SD from
-#: its bound, skew 2.1): acceptance 0.33 → 0.44, τ 10.4 → 4.9, 1300 → 650 steps, the same means and SDs.
+#: On normalized-bouc-wen's posterior on the bench's compare record (``bayes-mr bench``; n's marginal: mean ≈ SD
+#: from its bound, skew 2.1): acceptance 0.33 → 0.44, τ 10.4 → 4.9, the same means and SDs
+#: (``tests/inference/test_mcmc.py`` checks the choice on targets piled at a bound).
 EDGE_SDS = 3.0
 
 
@@ -108,10 +109,9 @@ class ProposalMap:
 MARGIN_PROBS = np.array([0.01, 0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 0.95, 0.99])
 _MARGIN_Z = stats.norm.ppf(MARGIN_PROBS)
 #: A marginal map is kept when it raises the pilot's joint Gaussian fit (Jacobian included) by at least this
-#: (nats per draw). Measured alone, on 50-step windows of spencer's unbudgeted posterior (packaged damper, 2800
-#: draws each): β (a long tail) 0.32-0.52; k0, c1b, k1 (plateaus against the prior's lower bound, excess
-#: kurtosis −0.9) 0.08-0.13; the others −0.05-0.036 (γ and n, on a thin ridge, −1.2 to −1.9: a nonlinear map
-#: bends a linear correlation); on 500 independent Gaussian draws at most 0.011.
+#: (nats per draw). On spencer's posterior of the packaged damper β (a long tail) gains 0.32-0.52 and the
+#: plateaus against the prior's lower bound 0.08-0.13, 500 independent Gaussian draws at most 0.011
+#: (``tests/inference/test_proposal_margins.py``: a plateau and a tail mapped, a Gaussian left alone).
 MARGIN_MIN_GAIN = 0.05
 
 
@@ -172,10 +172,10 @@ def unsheared(y: np.ndarray, shear) -> np.ndarray:
 
 
 #: A shear term is kept when it raises the mean log-density of the pilot's draws under the fitted Gaussian by at
-#: least this (nats per draw; :func:`fit_shear`). Measured: spencer's γ–n term on the packaged damper gains
-#: 0.22-0.35 (50-step windows of an unbudgeted chain, 2800 draws); the best spurious terms there, and on a DE
-#: pilot of a 12-d Gaussian, 0.02-0.05 (autocorrelated draws: a few hundred effective ones); on 4800 independent
-#: Gaussian draws 0.001. A spurious term fitted to a narrow pilot extrapolates as a parabola when the chain spreads.
+#: least this (nats per draw; :func:`fit_shear`): spencer's γ–n term on the packaged damper gains 0.22-0.35, the
+#: best spurious terms of autocorrelated pilots 0.02-0.05 (``tests/inference/test_shear.py``: the banana's
+#: parabola found, nothing in a Gaussian). A spurious term fitted to a narrow pilot extrapolates as a parabola
+#: when the chain spreads.
 SHEAR_MIN_GAIN = 0.1
 
 
@@ -235,8 +235,8 @@ def fit_proposal(x: np.ndarray, bounds=None) -> tuple:
     SDs from the bound, skew 1.4 and 1.1), and both are fitted better in u
     alone; but the benchmark's n moves with β₁ and γ (correlation ±0.98 in x,
     ±0.81 in u), and in u the joint fit loses 2.5 nats per draw — its
-    independence move then accepted 0.09 instead of 0.29 (τ 20 against 8,
-    measured). The compare record's n gains 0.16 nats: τ ≈ 4 there, 8–10 with n left in x.
+    independence move then accepts 0.09 instead of 0.29 (τ 20 against 8).
+    The compare record's n gains 0.16 nats: τ ≈ 4 there, 8–10 with n left in x.
     """
     x = np.asarray(x, float)
     box = None if bounds is None else tuple(np.asarray(b, float) for b in bounds)

@@ -1,7 +1,8 @@
 """Settings of an emcee run (:func:`bayes_mr.inference.mcmc.sampler.sample`): run length, moves, pilot, walkers, seed.
 
-The rules these settings steer are described where they act, in :mod:`bayes_mr.inference.mcmc.sampler`'s docstring;
-:mod:`bayes_mr.inference.mcmc.sampler` re-exports :class:`MCMCSettings`.
+The rules these settings steer are described where they act: the start in :mod:`.start`, the pilot and rounds in
+:mod:`.adapt`, the chain and its checkpoint in :mod:`.chain`, the stopping rule in :mod:`.convergence`, and why
+these moves and walkers in :mod:`.sampler`.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ class MCMCSettings:
         Stop when the post-burn-in chain is this many integrated
         autocorrelation times long (emcee's advice: 50).
     burn_tau_multiple : float
-        Burn-in in pilot autocorrelation times (:mod:`bayes_mr.inference.mcmc.sampler`).
+        Burn-in in pilot autocorrelation times (:mod:`bayes_mr.inference.mcmc.convergence`).
     rhat_max : float
         Every coordinate's rank-normalised split R-hat must be below this.
     max_steps : int
@@ -53,23 +54,23 @@ class MCMCSettings:
         check where its own integrated time projects the rule past it (``"projected"``,
         :func:`~.convergence.projection`), flagged not converged (``stopped`` says why). Where it is
         stopped depends on the machine's speed; the steps up to there do not, as long as the budget leaves the
-        adaptation rounds room to end by their own rules (:func:`~.mcmc.sample`'s pilot reserves the chain
-        proper's first steps, :data:`~.budget.MIN_CHAIN_STEPS`); None (default): no budget.
+        adaptation rounds room to end by their own rules (:func:`~.adapt.adapt` reserves the chain
+        proper's first steps, :data:`~.wall_time.MIN_CHAIN_STEPS`); None (default): no budget.
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
         Move names (:data:`~.moves.MOVES`) and weights of the chain (after a pilot: of the chain proper).
         Default: the independence move alone, every walker a Metropolis–Hastings chain of its own
-        (:mod:`bayes_mr.inference.mcmc.sampler`, "Walkers").
+        (:mod:`bayes_mr.inference.mcmc.sampler`).
     adapt_moves : tuple of (str, float)
         Moves of the adaptation rounds; the pilot runs those of them that need no proposal
         (:func:`~.moves.local_moves`).
     pilot_steps : int
         Steps of the pilot chain that fits the independence move's proposal
-        when :func:`~bayes_mr.inference.mcmc.sampler.sample` is given none (:mod:`bayes_mr.inference.mcmc.sampler`).
+        when :func:`~bayes_mr.inference.mcmc.sampler.sample` is given none (:mod:`bayes_mr.inference.mcmc.adapt`).
     adapt_rounds : int
         At most this many adaptation rounds after the pilot, each refitting the proposal to the
-        second half of a round that used it (:mod:`bayes_mr.inference.mcmc.sampler`); 0: the pilot's proposal is kept.
+        second half of a round that used it (:mod:`bayes_mr.inference.mcmc.adapt`); 0: the pilot's proposal is kept.
     adapt_steps : int
         Steps of each adaptation round.
     proposal_df : float
@@ -79,7 +80,7 @@ class MCMCSettings:
         (:data:`~.moves.DEFENSIVE_SHARE`; 0: none).
     chain_walkers : int or None
         Walkers of the chain proper after a pilot: the first this many of the ensemble the pilot and rounds
-        leave (:mod:`bayes_mr.inference.mcmc.sampler`, "Walkers"). Default: :data:`INDEPENDENT_WALKERS` when ``moves``
+        leave (:mod:`bayes_mr.inference.mcmc.sampler`). Default: :data:`INDEPENDENT_WALKERS` when ``moves``
         are all independence proposals, else the fewest differential evolution allows, 2·d + 2 (at most the
         pilot's). At least :data:`MIN_CHAINS`, and with ensemble moves even and ≥ 2·d + 2; without a pilot
         the chain has :meth:`walkers` walkers.

@@ -17,11 +17,10 @@ import time as _time
 
 import numpy as np
 
-#: Steps of the chain proper (after the pilot) the projection counts: the fewest the rule has held in.
-#: Measured with the pilot-fitted independence move alone on 8 walkers and a check every 50 steps, the main
-#: job's posteriors on the packaged damper's part A (1 kHz): dahl 250, lugre 300, normalized-bouc-wen 400,
-#: bouc-wen 650, spencer 850 steps (with the mixture of it and differential evolution, until stop 50: the bench's
-#: dahl posterior 300–600 over six seeds).
+#: Steps of the chain proper (after the pilot) the projection counts: the fewest the rule has held in. With the
+#: pilot-fitted independence move alone on 8 walkers and a check every 50 steps, the main job's posteriors on the
+#: packaged damper's part A (1 kHz) need dahl 250, lugre 300, normalized-bouc-wen 400, bouc-wen 650 and spencer
+#: 850 steps (``bayes-mr run``'s report lists each chain's steps).
 MIN_CHAIN_STEPS = 250
 
 
@@ -47,8 +46,7 @@ def check_budget(log_prob, center: np.ndarray, n_walkers: int, pilot_steps: int,
     The ensemble is evaluated once untimed, then :data:`TIMED_CALLS` times, and the fastest call is the step's
     cost: the first may compile the walkers' batched kernel (a fresh machine, or a kernel the least-squares fit
     did not use), which the chain pays once, not at every step; and one timed call carries whatever else the
-    machine did in that half second — in one ``make run`` normalized-bouc-wen's step measured 0.58 s where the
-    same evaluation took 0.23-0.28 s in separate processes before and after, and its posterior was refused.
+    machine did in that half second, which on a busy machine can double it and refuse a posterior that fits.
 
     Parameters
     ----------
