@@ -20,7 +20,7 @@ import xarray as xr
 from bayes_mr.execution.executor import local_threads
 from bayes_mr.models import EFFECTS
 from bayes_mr.diagnosis.fits import Fit, global_refit, refit
-from bayes_mr.diagnosis.ranking import rank
+from bayes_mr.diagnosis.ranking import rank as by_explanation
 from bayes_mr.diagnosis.screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
 
 
@@ -158,7 +158,8 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
                    if e.name not in have and (candidates is None or e.name in candidates)]
         if not effects:
             break
-        ranked = rank(screen(record, current, effects, seed=seed, progress=progress, executor=executor), threshold)
+        ranked = by_explanation(screen(record, current, effects, seed=seed, progress=progress, executor=executor),
+                                threshold)
         rounds.append(ranked)
         best = ranked[0]
         if not passes(best, threshold):
@@ -216,8 +217,9 @@ def ranked_select(record: xr.Dataset, base: Fit, *, candidates: tuple[str, ...] 
     names = offered if candidates is None else [n for n in candidates if n in offered]
     ranking: list[Candidate] = []
     if rank:
-        ranking = rank(screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say, executor=executor),
-                       threshold)
+        ranking = by_explanation(screen(record, base, [EFFECTS[n] for n in names], seed=seed, progress=say,
+                                        executor=executor),
+                                 threshold)
         names = [c.name for c in ranking if passes(c, threshold)]
     selected: list[Candidate] = []
     tried: list[Candidate] = []
