@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from bayes_mr.inference import results
-from bayes_mr.selection.comparison import compare, table
+from bayes_mr.selection.comparison import compare
 from bayes_mr.data import load_packaged
 from bayes_mr.inference.identify import Identify, LeastSquares, predict, validate
 from bayes_mr.report import figures
@@ -154,9 +154,9 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
     t0 = _time.perf_counter()
     cmp = compare(rec, FORMS, engines=engines, seed=seed, progress=False)
     compare_s = _time.perf_counter() - t0
-    forms = table(cmp)
+    forms = cmp.table()
     forms.to_csv(out / "forms.csv", index=False)
-    fits = {e: cmp["idata"][("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp["idata"]}
+    fits = {e: cmp.idata[("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp.idata}
     params = parameter_table(fits)
     params.to_csv(out / "parameters.csv", index=False)
     cv_rows, last = cross_validation(rec, held_out, seed)
