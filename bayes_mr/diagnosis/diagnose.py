@@ -139,7 +139,8 @@ def diagnose(
     Returns
     -------
     Diagnosis
-        Its JSON keys (:meth:`~Diagnosis.to_dict`) are the SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
+        Its JSON keys (:meth:`~Diagnosis.to_dict`) are the SPEC's ``diagnose`` keys —
+        ``baseline`` {model, mse, log_evidence},
         ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``),
         ``extended`` {model, mse, log_evidence}, ``gain`` {mse_ratio, delta_log_evidence, validation_mse_ratio; also
         ``delta_log_evidence_calibrated`` at the pooled ``evidence_scale``, :func:`_calibrated_gain`} — and
