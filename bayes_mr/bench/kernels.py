@@ -91,7 +91,7 @@ def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) 
 
 def compile_seconds() -> dict:
     """Cold (empty cache, compiles) and warm (loads from disk) first call of the dahl kernel, each in a fresh process."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]  # the source tree that holds bayes_mr/
     with tempfile.TemporaryDirectory(prefix="bayes_mr_bench_") as tmp:
         env = {**os.environ, CACHE_ENV: tmp, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
         times = {}
