@@ -6,8 +6,14 @@ Everything a notebook needs is one import away::
 
     record = bm.load("test.csv", mass=50.0)               # read, check, mask faults
     idata = bm.Identify("dahl", bm.Emcee()).fit(record)   # any engine, one result schema
-    table = bm.compare(record, ["dahl", "lugre"], engines=("lsq",))
+    cmp = bm.compare(record, ["dahl", "lugre"], engines=("lsq",))
+    cmp.selected, cmp.table(), cmp.plot()                 # a Comparison
     report = bm.diagnose(record, "dahl")                  # residual → cause → extension → gain
+    report.cause, report.table(), report.plot()           # a Diagnosis
+    bm.save(cmp, "compare.json"); bm.load("compare.json") # one pair for records, fits and results
+
+``bm.FORMS`` and ``bm.EFFECTS`` name the vocabulary a model is built from
+(``"FORM+EFFECT+…"``, :func:`get_model`).
 
 Names are resolved on first use (PEP 562), so ``import bayes_mr`` stays cheap
 and has no side effects; the contract (columns, model and effect names, CLI
@@ -23,12 +29,14 @@ __version__ = "0.1.0"
 #: Public name → (module, attribute).
 _PUBLIC = {
     # records
-    "load": ("bayes_mr.data", "load"),
+    "load": ("bayes_mr.storage", "load"),
     "load_packaged": ("bayes_mr.data", "load_packaged"),
     "write_record": ("bayes_mr.data", "write_record"),
     "make_record": ("bayes_mr.data", "make_record"),
     "RecordError": ("bayes_mr.data", "RecordError"),
     # models and simulation
+    "FORMS": ("bayes_mr.models", "FORMS"),
+    "EFFECTS": ("bayes_mr.models", "EFFECTS"),
     "get_model": ("bayes_mr.models", "get_model"),
     "Model": ("bayes_mr.models", "Model"),
     "simulate": ("bayes_mr.simulation.simulate", "simulate"),
@@ -49,12 +57,15 @@ _PUBLIC = {
     "UKFSettings": ("bayes_mr.inference.ukf.filter", "UKFSettings"),
     "summary_of": ("bayes_mr.inference.results", "summary_of"),
     "point_of": ("bayes_mr.inference.results", "point_of"),
-    "save": ("bayes_mr.inference.results", "save"),
+    "save": ("bayes_mr.storage", "save"),
     "load_result": ("bayes_mr.inference.results", "load_result"),
     "score": ("bayes_mr.scores", "score"),
     # comparison and diagnosis
     "compare": ("bayes_mr.selection.comparison", "compare"),
+    "Comparison": ("bayes_mr.selection.result", "Comparison"),
+    "crosscheck": ("bayes_mr.selection.comparison", "crosscheck"),
     "diagnose": ("bayes_mr.diagnosis.diagnose", "diagnose"),
+    "Diagnosis": ("bayes_mr.diagnosis.result", "Diagnosis"),
 }
 
 __all__ = sorted(_PUBLIC)

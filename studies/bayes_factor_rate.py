@@ -89,11 +89,11 @@ def compare_row(rec, residual: str, seed: int, executor=None) -> dict:
     """`compare` of the two candidates by least squares; ln BF(dahl : normalized-bouc-wen), raw and calibrated."""
     out = compare(rec, CANDIDATES, engines=("lsq",), seed=seed, progress=False, noise=residual, executor=executor)
     a, b = CANDIDATES
-    rows = {r["model"]: r for r in out["rows"]}
-    raw = out["bayes_factors"][b] - out["bayes_factors"][a]  # ln Z(a) − ln Z(b)
-    cal = out["bayes_factors_calibrated"][b] - out["bayes_factors_calibrated"][a]
-    return {"residual": residual, "ln_bf": raw, "ln_bf_calibrated": cal, "k_common": out["evidence_scale"],
-            "selected": out["selected"], "selected_calibrated": out["selected_calibrated"],
+    rows = {r["model"]: r for r in out.rows}
+    raw = out.bayes_factors[b] - out.bayes_factors[a]  # ln Z(a) − ln Z(b)
+    cal = out.bayes_factors_calibrated[b] - out.bayes_factors_calibrated[a]
+    return {"residual": residual, "ln_bf": raw, "ln_bf_calibrated": cal, "k_common": out.data["evidence_scale"],
+            "selected": out.selected, "selected_calibrated": out.data["selected_calibrated"],
             **{f"k_{m}": rows[m]["evidence_scale"] for m in CANDIDATES},
             **{f"noise_model_{m}": rows[m]["noise_model"] for m in CANDIDATES},
             "n": int(rec.sizes["time"]), "n_eff_acc": rows[a]["n_eff"].get("acceleration"),

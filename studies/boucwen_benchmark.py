@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from bayes_mr.inference import results
-from bayes_mr.selection.comparison import compare, table
+from bayes_mr.selection.comparison import compare
 from bayes_mr.data import load_packaged
 from bayes_mr.inference.identify import Identify, LeastSquares, predict, validate
 from bayes_mr.report import figures
@@ -123,19 +123,20 @@ def _figures(fig_dir: Path, rec, idata, held_out: int) -> None:
                  fig_dir / "hysteresis.png")
 
 
-def _selection_line(cmp: dict, compare_s: float) -> str:
-    """The verdict in words: the model, the route, its ln Bayes factor over the runner-up, raw and calibrated."""
+def _selection_line(cmp, compare_s: float) -> str:
+    """The verdict in words of a Comparison: the model, the route, its ln Bayes factor over the runner-up, raw and
+    calibrated."""
     def runner_up(factors: dict) -> str:
-        rest = {m: f for m, f in factors.items() if m != cmp["selected"]}
+        rest = {m: f for m, f in factors.items() if m != cmp.selected}
         m = min(rest, key=rest.get)
         return f"{rest[m]:.4g} over {m}"
 
-    line = f"Selected by the {cmp.get('selected_by') or 'evidence'}: **{cmp['selected']}**"
-    if cmp.get("bayes_factors_calibrated"):
-        line += (f", ln BF {runner_up(cmp['bayes_factors_calibrated'])} (likelihood raised to the pooled "
-                 f"k̄ = {cmp['evidence_scale']:.3g})")
-    if cmp.get("bayes_factors"):
-        line += f"; the raw evidence's ln BF {runner_up(cmp['bayes_factors'])}"
+    line = f"Selected by the {cmp.selected_by or 'evidence'}: **{cmp.selected}**"
+    if cmp.bayes_factors_calibrated:
+        line += (f", ln BF {runner_up(cmp.bayes_factors_calibrated)} (likelihood raised to the pooled "
+                 f"k̄ = {cmp.data['evidence_scale']:.3g})")
+    if cmp.bayes_factors:
+        line += f"; the raw evidence's ln BF {runner_up(cmp.bayes_factors)}"
     return line + f". The comparison took {compare_s / 60:.1f} min on this machine."
 
 
@@ -154,9 +155,9 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
     t0 = _time.perf_counter()
     cmp = compare(rec, FORMS, engines=engines, seed=seed, progress=False)
     compare_s = _time.perf_counter() - t0
-    forms = table(cmp)
+    forms = cmp.table()
     forms.to_csv(out / "forms.csv", index=False)
-    fits = {e: cmp["idata"][("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp["idata"]}
+    fits = {e: cmp.idata[("bouc-wen", e)] for e in engines if ("bouc-wen", e) in cmp.idata}
     params = parameter_table(fits)
     params.to_csv(out / "parameters.csv", index=False)
     cv_rows, last = cross_validation(rec, held_out, seed)
@@ -182,8 +183,9 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
              "## Published test RMSEs beside ours", "", markdown_table(lit), "",
              "![spectra](figures/spectra.png) ![loop](figures/hysteresis.png)"]
     (out / "report.md").write_text("\n".join(lines) + "\n")
-    return {"report": str(out / "report.md"), "selected": cmp["selected"], "selected_by": cmp.get("selected_by"),
-            "bayes_factors": cmp["bayes_factors"], "bayes_factors_calibrated": cmp.get("bayes_factors_calibrated"), "held_out_rmse": ours,
+    return {"report": str(out / "report.md"), "selected": cmp.selected, "selected_by": cmp.selected_by,
+            "bayes_factors": cmp.bayes_factors, "bayes_factors_calibrated": cmp.data.get("bayes_factors_calibrated"),
+            "held_out_rmse": ours,
             "held_out_rmse_vs_truth": cv_rows[-1]["RMSE vs true system [m]"], "compare_s": compare_s,
             "forms": forms.to_dict(orient="records"), "parameters": params.to_dict(orient="records"),
             "max_abs_z": {e: float(params[params.engine == e]["|z|"].max()) for e in fits},

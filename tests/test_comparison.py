@@ -37,20 +37,21 @@ def test_compare_selects_the_true_model_by_ti_with_mcmc_and_lsq():
     rec = offset_device_record(1.6, fs=250.0)
     out = compare(rec, ["dahl", "dahl+force_offset"], engines=("lsq", "mcmc"), progress=False,
                   estimators={"mcmc": Emcee(settings=SHORT)})
-    assert len(out["rows"]) == 4 and all(FIT_KEYS <= set(r) for r in out["rows"])
-    assert out["evidence_route"] == "ti" and out["evidence_engine"] == "mcmc"
-    assert out["selected"] == "dahl+force_offset"
-    assert out["bayes_factors"]["dahl+force_offset"] == 0.0 and out["bayes_factors"]["dahl"] > 3.0
-    for r in out["rows"]:
+    assert len(out.rows) == 4 and all(FIT_KEYS <= set(r) for r in out.rows)
+    assert out.evidence_route == "ti" and out.evidence_engine == "mcmc"
+    assert out.selected == "dahl+force_offset"
+    assert out.bayes_factors["dahl+force_offset"] == 0.0 and out.bayes_factors["dahl"] > 3.0
+    assert set(out.idata) == {(m, e) for m in ("dahl", "dahl+force_offset") for e in ("lsq", "mcmc")}
+    for r in out.rows:
         if r["engine"] == "mcmc":
             assert set(r["evidence_routes"]) == {"laplace", "ti", "ss"}
     # TI and stepping-stone on the same ladder agree within their errors. (Laplace is 2–5 nats off here:
     # on 1.5 s the weak stiffness k is far from Gaussian in the estimation coordinates — why TI selects.)
-    routes = next(r for r in out["rows"] if r["engine"] == "mcmc" and r["model"] == "dahl+force_offset")
+    routes = out.row("dahl+force_offset", "mcmc")
     routes = routes["evidence_routes"]
     assert abs(routes["ti"]["log_z"] - routes["ss"]["log_z"]) < 3 * math.hypot(routes["ti"]["total_error"],
                                                                                routes["ss"]["total_error"])
-    assert out["crosscheck"] == {}
+    assert out.crosscheck == {}
 
 
 def test_crosscheck_of_ukf_and_mcmc_rows():

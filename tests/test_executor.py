@@ -24,8 +24,10 @@ from records import offset_device_record
 MODELS = ["dahl", "dahl+force_offset"]
 
 
-def comparable(out: dict) -> str:
-    """The JSON of a comparison that must not depend on where it ran (wall times left out)."""
+def comparable(out) -> str:
+    """The JSON of a comparison (a Comparison, or the CLI's JSON) that must not depend on where it ran (wall times
+    left out)."""
+    out = out if isinstance(out, dict) else out.to_dict()
     rows = [{k: v for k, v in r.items() if k != "wall_s"} for r in out["rows"]]
     return json.dumps(_jsonable({"rows": rows, "selected": out["selected"], "bayes_factors": out["bayes_factors"]}),
                       sort_keys=True)
@@ -85,9 +87,9 @@ def test_compare_with_ti_evidence_on_a_dask_cluster_sends_the_rungs_there_and_gi
     with Client(cluster) as client, get_task_stream(client) as stream:
         b = compare(record, ["dahl"], engines=("mcmc",), progress=False, executor=client)
     assert len(stream.data) == 1 + 7  # the fit, and the reference ladder's 7 rungs between β = 0 and 1
-    assert a["evidence_route"] == b["evidence_route"] == "ti"
-    assert json.dumps(_jsonable(_no_walls(a["rows"])), sort_keys=True) == \
-        json.dumps(_jsonable(_no_walls(b["rows"])), sort_keys=True)
+    assert a.evidence_route == b.evidence_route == "ti"
+    assert json.dumps(_jsonable(_no_walls(a.rows)), sort_keys=True) == \
+        json.dumps(_jsonable(_no_walls(b.rows)), sort_keys=True)
 
 
 def test_compare_on_a_process_pool_gives_the_in_process_json_and_reports_each_fit(record, pool):
@@ -95,7 +97,7 @@ def test_compare_on_a_process_pool_gives_the_in_process_json_and_reports_each_fi
     a = compare(record, MODELS, engines=("lsq",), progress=False)
     b = compare(record, MODELS, engines=("lsq",), progress=messages.append, executor=pool)
     assert comparable(a) == comparable(b)
-    assert set(b["idata"]) == {(m, "lsq") for m in MODELS}
+    assert set(b.idata) == {(m, "lsq") for m in MODELS}
     done = sorted(m for m in messages if "ln Z" in m)
     assert len(done) == 2 and all(m.endswith(("[1/2]", "[2/2]")) for m in done)
 
@@ -112,8 +114,8 @@ def test_a_failing_job_is_a_row_with_its_error(record, pool):
 
     out = compare(record, MODELS, engines=("lsq",), progress=False, executor=pool,
                   estimators={"lsq": Unpicklable()})
-    assert len(out["rows"]) == 2 and all("error" in r for r in out["rows"])
-    assert out["selected"] is None
+    assert len(out.rows) == 2 and all("error" in r for r in out.rows)
+    assert out.selected is None and out.idata == {}
 
 
 def test_diagnose_candidates_on_a_dask_cluster_give_the_same_cause_and_scores(record, cluster):
@@ -122,9 +124,9 @@ def test_diagnose_candidates_on_a_dask_cluster_give_the_same_cause_and_scores(re
     a = diagnose(record, "dahl", progress=False)
     with Client(cluster) as client:
         b = diagnose(record, "dahl", progress=False, executor=client)
-    assert a["cause"] == b["cause"] == "force_offset"
-    assert a["causes"] == b["causes"] and a["selection"] == b["selection"]
-    assert a["extended"] == b["extended"]
+    assert a.cause == b.cause == "force_offset"
+    assert a.causes == b.causes and a.selection == b.selection
+    assert a.extended == b.extended
 
 
 def _spy_threads(monkeypatch, module, name: str) -> set:
@@ -154,8 +156,8 @@ def test_diagnose_on_this_process_threads_gives_the_result_in_turn(record, monke
     assert not any(n.startswith("bayes_mr") for n in seen)
     if numba.get_num_threads() >= 2 and numba.threading_layer() in ("omp", "tbb"):
         assert on_threads
-    assert a["cause"] == b["cause"] == "force_offset"
-    assert a["causes"] == b["causes"] and a["selection"] == b["selection"] and a["extended"] == b["extended"]
+    assert a.cause == b.cause == "force_offset"
+    assert a.causes == b.causes and a.selection == b.selection and a.extended == b.extended
 
 
 def test_least_squares_starts_side_by_side_give_the_fit_in_turn(record, monkeypatch):

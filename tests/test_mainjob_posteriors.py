@@ -58,7 +58,7 @@ def test_the_first_pass_and_the_posterior_are_compare_s_rows():
     est = {"mcmc": Emcee(settings=replace(mcmc, seed=3, progress=False), evidence=budget.evidence),
            "lsq": LeastSquares(settings=LSQSettings(seed=3))}
     ref = compare(rec, ["dahl"], engines=("lsq", "mcmc"), validate=rec, seed=3, progress=False, estimators=est)
-    for mine, theirs in ((rows[0], ref["rows"][0]), (row, ref["rows"][1])):
+    for mine, theirs in ((rows[0], ref.rows[0]), (row, ref.rows[1])):
         assert mine["params"] == theirs["params"] and mine["log_evidence"] == theirs["log_evidence"], (mine, theirs)
         assert mine["validation"]["mse"] == theirs["validation"]["mse"]
 

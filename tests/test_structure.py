@@ -152,7 +152,7 @@ LAYERS = (
     ("likelihood", "scores"),
     ("inference",),
     ("selection", "diagnosis"),
-    ("run", "bench"),
+    ("run", "bench", "storage"),
     ("cli",),
 )
 

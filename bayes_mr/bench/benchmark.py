@@ -326,8 +326,8 @@ def diagnose_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, o
         lik.predict(lik.phi_lo)
     t0 = _time.perf_counter()
     out = diagnose(rec, "dahl", seed=seed, progress=False)
-    return {"diagnose_s": _time.perf_counter() - t0, "diagnose_cause": out["cause"],
-            "diagnose_mse_ratio": out["gain"]["mse_ratio"],
+    return {"diagnose_s": _time.perf_counter() - t0, "diagnose_cause": out.cause,
+            "diagnose_mse_ratio": out.gain["mse_ratio"],
             "diagnose_record": f"dahl + {offset:g} N force offset hidden, {duration:g} s at {fs:g} Hz"}
 
 
@@ -359,9 +359,9 @@ def compare_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, wo
         t0 = _time.perf_counter()
         out = compare(rec, COMPARE_FORMS, engines=("lsq", "mcmc", "ukf"), seed=seed, progress=False, executor=ex)
         wall = _time.perf_counter() - t0
-    return {"compare_s": wall, "compare_workers": int(workers or 0), "compare_selected": out["selected"],
-            "compare_selected_by": out.get("selected_by") or out.get("refused"),
-            "compare_fit_s": {f"{r['model']} × {r['engine']}": float(r.get("wall_s", math.nan)) for r in out["rows"]},
+    return {"compare_s": wall, "compare_workers": int(workers or 0), "compare_selected": out.selected,
+            "compare_selected_by": out.selected_by or out.refused,
+            "compare_fit_s": {f"{r['model']} × {r['engine']}": float(r.get("wall_s", math.nan)) for r in out.rows},
             "compare_record": f"dahl, {duration:g} s at {fs:g} Hz; {', '.join(COMPARE_FORMS)} × lsq, mcmc, ukf"}
 
 

@@ -1,7 +1,7 @@
 """Bench figures of the compiled kernels: generic, inlined and specialised per model, and their compile time.
 
-:func:`kernel_bench` measures them for :mod:`bayes_mr.bench.benchmark`; they time the
-compile tiers of :mod:`bayes_mr._compile.specialise` rather than an engine:
+Kept apart from :mod:`bayes_mr.bench.benchmark` (which calls :func:`kernel_bench`) so
+the kernel figures live next to nothing else:
 
 * ``simulate_ns_per_step`` — ``{form: {"generic": ns, "inlined": ns, "specialised": ns}}``:
   one parameter set, one thread, a structure test on the first 10 s of
@@ -91,7 +91,7 @@ def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) 
 
 def compile_seconds() -> dict:
     """Cold (empty cache, compiles) and warm (loads from disk) first call of the dahl kernel, each in a fresh process."""
-    root = Path(__file__).resolve().parents[2]  # the folder that holds the package
+    root = Path(__file__).resolve().parents[2]  # the source tree that holds bayes_mr/
     with tempfile.TemporaryDirectory(prefix="bayes_mr_bench_") as tmp:
         env = {**os.environ, CACHE_ENV: tmp, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
         times = {}

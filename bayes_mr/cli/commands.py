@@ -199,7 +199,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from bayes_mr.selection.comparison import compare, table
+    from bayes_mr.selection.comparison import compare
     from bayes_mr.inference.identify import UKF, Emcee
     from bayes_mr.report.markdown import markdown_table
 
@@ -213,11 +213,11 @@ def cmd_compare(args) -> int:
             raise CLIError(f"--evidence {args.evidence} is the route of the mcmc rows' evidence: add mcmc to --engines")
         estimators["mcmc"] = Emcee(evidence=args.evidence)
     with _executor(args) as ex:
-        out = compare(rec, models, engines=engines, validate=other, seed=args.seed,
-                      progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out, estimators=estimators,
-                      executor=ex, noise=args.noise, force=args.force)
-    out.pop("idata")
-    print(markdown_table(table(out)), file=sys.stderr)
+        result = compare(rec, models, engines=engines, validate=other, seed=args.seed,
+                         progress=progress_say(on_terminal(not args.quiet)), out_dir=args.out,
+                         estimators=estimators, executor=ex, noise=args.noise, force=args.force)
+    print(markdown_table(result.table()), file=sys.stderr)
+    out = result.to_dict()
     if out["selected"]:
         print(f"selected by {out['selected_by']}: {out['selected']}" + (" (forced)" if out.get("forced") else ""),
               file=sys.stderr)
@@ -238,7 +238,7 @@ def cmd_diagnose(args) -> int:
     with _executor(args) as ex:
         out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,
                        progress=progress_say(on_terminal(not args.quiet)), executor=ex, noise=args.noise,
-                       terms=args.terms, search=args.search)
+                       terms=args.terms, search=args.search).to_dict()
     print(f"baseline {out['baseline']['model']}: cause {out['cause']}; extended {out['extended']['model']}, "
           f"MSE ratio {out['gain']['mse_ratio']:.4g}, Δ ln Z {out['gain']['delta_log_evidence']:.4g}; {out['verdict']}",
           file=sys.stderr)

@@ -1,6 +1,7 @@
 """Diagnosis: what a model gets wrong on measured data, its cause, the extended model and the gain.
 
 * :mod:`.diagnose` — :func:`~.diagnose.diagnose`, the whole route: baseline, residual, cause, extension, gain;
+* :mod:`.result` — :class:`~.result.Diagnosis`, what it returns (JSON keys, table, figure, fits);
 * :mod:`.residuals` — where the simulation departs from the record (time, displacement, velocity, command);
 * :mod:`.screen`, :mod:`.inflation` — every named effect scored as an extension, corrected for correlated
   residuals; :mod:`.search` — how effects are added and ranked;
@@ -11,5 +12,6 @@
 """
 
 from bayes_mr.diagnosis.diagnose import diagnose, select_baseline
+from bayes_mr.diagnosis.result import Diagnosis
 
-__all__ = ["diagnose", "select_baseline"]
+__all__ = ["Diagnosis", "diagnose", "select_baseline"]

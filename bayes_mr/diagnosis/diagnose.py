@@ -3,7 +3,7 @@
 >>> from bayes_mr.data import load_packaged
 >>> from bayes_mr.diagnosis.diagnose import diagnose
 >>> report = diagnose(load_packaged(), out_dir="results/diagnose")   # doctest: +SKIP
->>> report["cause"], report["gain"]["mse_ratio"]                      # doctest: +SKIP
+>>> report.cause, report.gain["mse_ratio"], report.table()             # doctest: +SKIP
 
 1. **Show what is wrong.** Fit the baseline (given, or the form with the
    highest Laplace evidence) by output-error least squares, and view the
@@ -28,6 +28,7 @@ import json
 import math
 import os
 import time as _time
+from functools import partial
 from pathlib import Path
 
 import xarray as xr
@@ -41,12 +42,13 @@ from bayes_mr.diagnosis.fits import Fit, fit_model, inference_data, predict
 from bayes_mr.diagnosis.residuals import residual_views, varying_voltage
 from bayes_mr.diagnosis.extend import fit_at
 from bayes_mr.diagnosis.ranking import ambiguous
+from bayes_mr.diagnosis.result import Diagnosis
 from bayes_mr.diagnosis.search import Search
 from bayes_mr.diagnosis.screen import THRESHOLD, Candidate
 from bayes_mr.diagnosis.term_search import search_terms
 from bayes_mr.diagnosis.unexplained import BEYOND, FLOOR_RATIO, unexplained, verdict, worst_ratio
 
-__all__ = ["FORMS", "THRESHOLD", "Search", "diagnose", "select_baseline"]
+__all__ = ["FORMS", "THRESHOLD", "Diagnosis", "Search", "diagnose", "select_baseline"]
 
 #: Forms compared when no baseline is given (spencer only for device tests with a varying voltage).
 FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
@@ -102,7 +104,7 @@ def diagnose(
     settings: LSQSettings | None = None, noise: str = "iid",
     executor=None, terms: bool | None = None,
     search: Search | str = "forward", start: dict[str, float] | None = None,
-) -> dict:
+) -> Diagnosis:
     """Show where ``model`` departs from ``record``, name the cause, extend, measure the gain.
 
     Parameters
@@ -139,8 +141,9 @@ def diagnose(
 
     Returns
     -------
-    dict
-        The SPEC's ``diagnose`` keys — ``baseline`` {model, mse, log_evidence},
+    Diagnosis
+        Its JSON keys (:meth:`~Diagnosis.to_dict`) are the SPEC's ``diagnose`` keys —
+        ``baseline`` {model, mse, log_evidence},
         ``cause`` (an effect name or ``"none"``), ``causes`` (every candidate ranked, ``{name, score, ...}``: those
         that pass by the log-likelihood they add, :mod:`.ranking`), ``ambiguous`` and ``alternatives`` (the
         effects the record cannot tell from the cause, and their extended models, :func:`_ambiguity`),
@@ -151,6 +154,8 @@ def diagnose(
         ``baselines`` (form comparison), ``wall_s``, ``figures``, ``report``;
         ``unexplained``, ``unexplained_ratio``, ``at_noise_floor``, ``verdict``
         (:func:`_unexplained`); ``terms`` (:func:`_search`); with ``out_dir``, ``results`` (the ``.nc`` paths).
+        Its ``idata`` holds the baseline, the extended model and (with a kept term) the term search's model
+        as InferenceData, built when first read (with ``out_dir``: the ones written).
     """
     t0 = _time.perf_counter()
     say = progress_say(progress)
@@ -169,11 +174,15 @@ def diagnose(
     out["terms"], term_fit = _search(record, ext, _asked(out) if terms is None else terms, validate, seed,
                                      search.threshold, say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)
+    fits = {label: partial(inference_data, f, seed=seed)
+            for label, f in (("baseline", base), ("extended", ext), ("terms", term_fit)) if f is not None}
     if out_dir is not None:  # the report states the time to here; the JSON the time with the report
-        out.update(_write(out, record, (base, ext, term_fit), before, after, rounds, Path(out_dir), seed))
+        written, built = _write(out, record, (base, ext, term_fit), before, after, rounds, Path(out_dir), seed)
+        out.update(written)
+        fits.update(built)
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
-    return out
+    return Diagnosis(out, fits)
 
 
 def _baseline(record: xr.Dataset, model, settings: LSQSettings, say, noise: str = "iid",
@@ -235,20 +244,23 @@ def _search(record: xr.Dataset, ext: Fit, ask: bool | str | None, validate: xr.D
 
 
 def _write(out: dict, record: xr.Dataset, models: tuple[Fit, Fit, Fit | None], before, after, rounds,
-           out_dir: Path, seed: int) -> dict:
+           out_dir: Path, seed: int) -> tuple[dict, dict]:
     """Report, figures, and ``baseline.nc`` / ``extended.nc`` / (with kept terms) ``terms.nc``: InferenceData
-    ``bayes-mr validate`` reads. ``models`` is (baseline, extended, the term search's model or None)."""
+    ``bayes-mr validate`` reads. ``models`` is (baseline, extended, the term search's model or None).
+
+    Returns the JSON keys of what was written and label → the InferenceData written."""
     from bayes_mr.inference import results
     from bayes_mr.report.diagnose import write_report
 
     base, ext, term_fit = models
     paths = write_report(out, record, base, ext, before, after, rounds, out_dir)
-    fits = {}
+    fits, built = {}, {}
     for label, f in (("baseline", base), ("extended", ext), ("terms", term_fit)):
         if f is not None:
-            fits[label] = str(results.save(inference_data(f, seed=seed), out_dir / f"{label}.nc"))
+            built[label] = inference_data(f, seed=seed)
+            fits[label] = str(results.save(built[label], out_dir / f"{label}.nc"))
     return {"figures": {k: str(v) for k, v in paths.items() if k != "report"}, "report": str(paths["report"]),
-            "results": fits}
+            "results": fits}, built
 
 
 def _report(record: xr.Dataset, base: Fit, ext: Fit, selected: list[Candidate], rounds, validation,

@@ -185,3 +185,35 @@ def command_loops(v: np.ndarray, curves: dict[str, np.ndarray], command: np.ndar
         fig.colorbar(art, ax=list(axes[0]), label="command")
     fig.suptitle(title)
     return fig
+
+
+def bars(panels: dict[str, dict[str, float | None]], *, title: str = "", highlight: set[str] | None = None,
+         reference: dict[str, float] | None = None) -> Figure:
+    """Horizontal bars side by side: ``panels[xlabel][label] = value``, one panel per quantity.
+
+    Labels keep their order from top to bottom; a value that is None or not finite leaves its bar out
+    (the label stays, so the panels line up). Bars whose label is in ``highlight`` are drawn in a second
+    colour (the selected model, the named effects); ``reference`` (xlabel → value) draws a dashed line
+    in that panel (a threshold, a ratio of 1).
+    """
+    labels = list(dict.fromkeys(label for series in panels.values() for label in series))
+    fig, axes = subplots(1, max(1, len(panels)), figsize=(3.6 * max(1, len(panels)) + 1.5,
+                                                       0.9 + 0.32 * max(1, len(labels))),
+                         sharey=True, squeeze=False)
+    y = np.arange(len(labels))[::-1]
+    for ax, (xlabel, series) in zip(axes[0], panels.items()):
+        for yi, label in zip(y, labels):
+            v = series.get(label)
+            if v is None or not np.isfinite(float(v)):
+                continue
+            ax.barh(yi, float(v), color="tab:orange" if highlight and label in highlight else "tab:blue",
+                    alpha=0.85)
+        if reference and xlabel in reference:
+            ax.axvline(reference[xlabel], color="k", ls="--", lw=0.8)
+        ax.axvline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(xlabel)
+        ax.grid(alpha=0.3, axis="x")
+    axes[0, 0].set_yticks(y, [fill(label, 34) for label in labels], fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -58,7 +58,7 @@ def noise_sensitivity(part_a: xr.Dataset, forms: tuple[str, ...], noise: str, ro
     say(f"{', '.join(forms)}: least squares under the {other} residual model")
     with local_threads() as pool:  # side by side on this process's threads (the same fits, executor.py)
         alt_rows = compare(part_a, list(forms), engines=["lsq"], seed=seed, progress=say, noise=other,
-                           executor=pool)["rows"]
+                           executor=pool).rows
     out = {}
     for name, rs in ((noise, rows), (other, alt_rows)):
         out[name] = _laplace_choice(rs)

@@ -84,9 +84,9 @@ def first_pass(part_a, part_b, budget: Budget, *, seed: int, say) -> dict:
     wait(child, say)
     ukf = compare(part_a, forms, engines=("ukf",), validate=part_b, seed=seed, progress=say,
                   estimators={"ukf": UKF(n_lhs=budget.ukf_lhs, taus=budget.ukf_taus)}, noise=budget.noise)
-    by_pair = {(r["model"], r["engine"]): r for r in lsq_rows + ukf["rows"]}
+    by_pair = {(r["model"], r["engine"]): r for r in lsq_rows + ukf.rows}
     rows = [by_pair[(m, e)] for m in forms for e in ("lsq", "ukf")]
-    return {"rows": rows, **choose(rows, forms), "idata": {**lsq_idata, **ukf["idata"]}, "fitted": fitted}
+    return {"rows": rows, **choose(rows, forms), "idata": {**lsq_idata, **ukf.idata}, "fitted": fitted}
 
 
 def with_posteriors(first: dict, part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:

@@ -119,7 +119,8 @@ def diagnose_selected(record: xr.Dataset | None, model: str, budget: Budget, *, 
     try:
         out = diagnose(window, model, start=simulating_point(row),
                        search=Search("ranked", candidates=CANDIDATES, max_effects=5), validate=b_hi, seed=seed,
-                       terms=budget.terms, progress=say, noise=budget.noise, out_dir=diagnosis_dir(out_dir, model))
+                       terms=budget.terms, progress=say, noise=budget.noise,
+                       out_dir=diagnosis_dir(out_dir, model)).to_dict()
     except (RuntimeError, ValueError) as exc:
         out = {"error": str(exc)}
     return {model: out, "_part_b": b_hi}

@@ -2,10 +2,11 @@
 
 >>> from bayes_mr.selection.comparison import compare
 >>> out = compare(record, ["dahl", "lugre"], engines=("lsq", "mcmc"))   # doctest: +SKIP
->>> out["selected"], out["bayes_factors"]                              # doctest: +SKIP
+>>> out.selected, out.bayes_factors, out.table()                       # doctest: +SKIP
 
 Every (model, engine) pair is fitted with :class:`bayes_mr.inference.identify.Identify`
-and stored as InferenceData; one row per pair carries the ``fit`` JSON keys.
+and stored as InferenceData; one row per pair carries the ``fit`` JSON keys. The
+result is a :class:`~bayes_mr.selection.result.Comparison` (JSON keys, table, figure, fits).
 A fit that fails (a model that diverges everywhere, a filter that loses every
 run) is a row with ``error`` set, never the end of the comparison.
 
@@ -30,7 +31,6 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import pandas as pd
 import xarray as xr
 
 from bayes_mr.inference import results
@@ -41,7 +41,11 @@ from bayes_mr.selection.fit_jobs import units as fit_units
 from bayes_mr.inference.lsq.evidence_scale import LaplaceTerms, at_common_scale
 from bayes_mr.models import get_model
 from bayes_mr.execution.progress import say as progress_say
+from bayes_mr.selection.result import Comparison, table
 from bayes_mr.simulation.simulate import Inputs
+
+__all__ = ["ROUTES", "SELECT_ON", "Comparison", "calibrated_evidence", "choose", "compare", "crosscheck", "row_of",
+           "selection_route", "simulating_point", "table"]
 
 #: Route of each engine's ``log_evidence``, in order of preference for selection.
 #: Evidence routes a comparison selects by, in order of preference. The UKF's innovation likelihood is
@@ -121,7 +125,7 @@ def compare(
     executor=None,
     noise: str = "iid",
     force: bool = False,
-) -> dict:
+) -> Comparison:
     """Fit every model with every engine and compare.
 
     Parameters
@@ -154,13 +158,12 @@ def compare(
 
     Returns
     -------
-    dict
-        ``rows`` (one per model × engine: the ``fit`` keys, ``error`` if it
-        failed, ``validation`` with ``validate``), ``selected``,
-        ``bayes_factors`` (model → ln Z(selected) − ln Z(model)), ``selected_on``
-        (:data:`SELECT_ON`), :func:`calibrated_evidence`'s keys,
-        ``evidence_route``, ``evidence_engine``, ``crosscheck`` and
-        ``idata`` (not JSON: (model, engine) → InferenceData).
+    Comparison
+        Its JSON keys (:meth:`~Comparison.to_dict`): ``rows`` (one per model × engine: the ``fit`` keys,
+        ``error`` if it failed, ``validation`` with ``validate``), ``selected``, ``bayes_factors``
+        (model → ln Z(selected) − ln Z(model)), ``selected_on`` (:data:`SELECT_ON`),
+        :func:`calibrated_evidence`'s keys, ``evidence_route``, ``evidence_engine``, ``crosscheck``;
+        and ``idata``: (model, engine) → InferenceData of every fit that did not fail.
     """
     say, models = progress_say(progress), [get_model(m).name for m in models]
     if not models:
@@ -183,8 +186,7 @@ def compare(
            "input_interp": Inputs.from_record(record).interp}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
-    out["idata"] = fits
-    return out
+    return Comparison(out, fits)
 
 
 def choose(rows: list[dict], models: Sequence[str], force: bool = False) -> dict:
@@ -312,29 +314,3 @@ def _run_grid(pairs: list[tuple[str, str]], record: xr.Dataset, validate, seed: 
     fits = {p: done[p][1] for p in pairs if done[p][1] is not None}
     return rows, fits
 
-
-def table(out: dict) -> pd.DataFrame:
-    """One line per row of a comparison: model, engine, residual model and n_eff, ln Z (route, error), ln BF (raw and
-    calibrated), MSE, force NRMSE, E_t, wall time."""
-    lines = []
-    for r in out["rows"]:
-        fe = r.get("force_errors") or {}
-        route = (r.get("evidence_routes") or {}).get(r.get("evidence_route") or "", {})
-        n_eff = r.get("n_eff") if isinstance(r.get("n_eff"), dict) else {}
-        line = {"model": r["model"], "engine": r["engine"], "noise": r.get("noise_model"),
-                "n_eff": ", ".join(f"{c} {v:.4g}" for c, v in n_eff.items() if v is not None),
-                "ln Z": r.get("log_evidence"), "route": r.get("evidence_route"), "ln Z error": route.get("total_error"),
-                "ln BF vs selected": out["bayes_factors"].get(r["model"]) if r["engine"] == out["evidence_engine"]
-                else None,
-                "ln Z calibrated": (out.get("log_evidence_calibrated") or {}).get(r["model"])
-                if r["engine"] == out["evidence_engine"] else None,
-                "ln BF calibrated": (out.get("bayes_factors_calibrated") or {}).get(r["model"])
-                if r["engine"] == out["evidence_engine"] else None,
-                "MSE": r.get("mse"), "force NRMSE": r.get("force_nrmse"), "E_t": fe.get("E_t"),
-                "wall [s]": r.get("wall_s"), "error": r.get("error", "")}
-        v = r.get("validation")
-        if v is not None:
-            line["MSE (validation)"] = v.get("mse")
-            line["force NRMSE (validation)"] = v.get("force_nrmse")
-        lines.append(line)
-    return pd.DataFrame(lines)

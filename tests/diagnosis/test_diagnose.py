@@ -122,7 +122,7 @@ FULL = effect_cases(STRUCTURE_MAGNITUDES, DEVICE_MAGNITUDES, DEFAULT)
 @pytest.mark.parametrize("case", DEFAULT, ids=case_id)
 def test_hidden_effect_is_named_and_fixed(case):
     kind, effect, magnitude, seed = case
-    out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False)
+    out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False).to_dict()
     assert not naming_failures(out, effect, THRESHOLD)
 
 
@@ -130,7 +130,7 @@ def test_hidden_effect_is_named_and_fixed(case):
 @pytest.mark.parametrize("case", FULL, ids=case_id)
 def test_hidden_effect_is_named_and_fixed_full_matrix(case):
     kind, effect, magnitude, seed = case
-    out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False)
+    out = diagnose(effect_case(kind, effect, magnitude, seed), "dahl", progress=False).to_dict()
     assert not naming_failures(out, effect, THRESHOLD)
 
 
@@ -138,7 +138,7 @@ def test_delay_of_the_displacement_channel_names_that_channel():
     model = Model(get_model("dahl").form, (EFFECTS["sensor_delay"].with_options(channel="displacement"),))
     rec = signal_record(model, "structure", {"delay": 0.006}, duration=6.0, fs=500.0, amplitude=3e-3, fmax=10.0,
                         signal_seed=4, mass=MASS, noise=0.01, seed=81)
-    out = diagnose(rec, "dahl", progress=False)
+    out = diagnose(rec, "dahl", progress=False).to_dict()
     assert not naming_failures(out, "sensor_delay", THRESHOLD)
     assert out["extended"]["options"]["sensor_delay"]["channel"] == "displacement"
 
@@ -160,7 +160,7 @@ CLEAN_SLOW = [
 @pytest.mark.parametrize("case", CLEAN, ids=lambda c: "-".join(map(str, c)))
 def test_clean_record_gives_none(case):
     kind, form, signal, seed = case
-    out = diagnose(simulated_record(kind, form, signal=signal, seed=seed), form, progress=False)
+    out = diagnose(simulated_record(kind, form, signal=signal, seed=seed), form, progress=False).to_dict()
     assert out["cause"] == NONE, out["causes"][:2]
     assert out["effects"] == []
     assert out["extended"]["model"] == form and out["gain"]["mse_ratio"] == 1.0
@@ -171,7 +171,7 @@ def test_clean_record_gives_none(case):
 @pytest.mark.parametrize("case", CLEAN_SLOW, ids=lambda c: "-".join(map(str, c)))
 def test_clean_record_gives_none_more_forms(case):
     kind, form, signal, seed = case
-    out = diagnose(simulated_record(kind, form, signal=signal, seed=seed), form, progress=False)
+    out = diagnose(simulated_record(kind, form, signal=signal, seed=seed), form, progress=False).to_dict()
     assert out["cause"] == NONE, out["causes"][:2]
 
 
@@ -182,7 +182,7 @@ def test_a_named_extension_reaches_its_optimum():
     extension's global restart (differential evolution over every parameter) must reach that basin."""
     rec = simulated_record("structure", "dahl", {"small_amplitude_regime": {"r_s": 0.3, "x_s": 3e-4}}, seed=3,
                            signal="amp")
-    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1))
+    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1)).to_dict()
     assert out["cause"] == "small_amplitude_regime"
     restart = out["selection"][0]["restart"]
     assert restart["improved"] and restart["cost_after"] < 0.5 * restart["cost_before"]
@@ -191,7 +191,7 @@ def test_a_named_extension_reaches_its_optimum():
 
 def test_two_effects_are_both_named():
     rec = simulated_record("structure", "dahl", {"force_offset": 0.5, "stiffness_drift": 0.02}, seed=2)
-    out = diagnose(rec, "dahl", progress=False)
+    out = diagnose(rec, "dahl", progress=False).to_dict()
     assert set(out["effects"]) == {"force_offset", "stiffness_drift"}, out["selection"]
     assert out["cause"] in out["effects"]
     assert set(get_model(out["extended"]["model"]).effects) == {EFFECTS["force_offset"], EFFECTS["stiffness_drift"]}
@@ -208,7 +208,7 @@ def test_baseline_by_evidence_validation_and_report(tmp_path):
     """No model given: the forms are compared; --validate gives method 2; the report is written."""
     rec = simulated_record("structure", "dahl", {"force_offset": 2.0}, seed=5, duration=5.0)
     other = simulated_record("structure", "dahl", {"force_offset": 2.0}, seed=6, duration=5.0, signal="chirp")
-    out = diagnose(rec, validate=other, out_dir=tmp_path, progress=False)
+    out = diagnose(rec, validate=other, out_dir=tmp_path, progress=False).to_dict()
     assert {r["model"] for r in out["baselines"]} == {"normalized-bouc-wen", "dahl", "lugre", "bouc-wen"}
     best = max((r for r in out["baselines"] if r["log_evidence"] is not None), key=lambda r: r["log_evidence"])
     assert out["baseline"]["model"] == best["model"]
@@ -240,7 +240,8 @@ def test_packaged_record_segment():
     from bayes_mr.data import load_packaged
 
     rec = load_packaged().isel(time=slice(0, 9000))
-    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1))  # a smoke test: one round is the whole route
+    # a smoke test: one round is the whole route
+    out = diagnose(rec, "dahl", progress=False, search=Search(max_effects=1)).to_dict()
     _check_structure(out)
 
 
@@ -248,6 +249,6 @@ def test_packaged_record_segment():
 def test_packaged_record_whole_with_baseline_by_evidence(tmp_path):
     from bayes_mr.data import load_packaged
 
-    out = diagnose(load_packaged(), out_dir=tmp_path, progress=False)
+    out = diagnose(load_packaged(), out_dir=tmp_path, progress=False).to_dict()
     _check_structure(out)
     assert out["masked"] >= 0 and out["baselines"]

@@ -252,7 +252,7 @@ def _diagnose_case(case) -> tuple[dict, str]:
     kind, effect, magnitude, seed = case
     table = STRUCTURE_MAGNITUDES if kind == "structure" else DEVICE_MAGNITUDES
     rec, base = hidden_record(kind, effect, table[effect][magnitude], seed=seed)
-    return diagnose(rec, base, progress=False), effect
+    return diagnose(rec, base, progress=False).to_dict(), effect
 
 
 @pytest.mark.parametrize("case", DEFAULT, ids=case_id)
@@ -271,7 +271,7 @@ def test_new_hidden_effect_is_named_and_gains_full_matrix(case):
 def test_clean_commanded_record_gives_none():
     """A clean dahl+voltage_dependence record under a stepped command: the command-path effects stay quiet."""
     rec, base = hidden_record("device", None, seed=11, commanded=True)
-    out = diagnose(rec, base, progress=False)
+    out = diagnose(rec, base, progress=False).to_dict()
     assert out["cause"] == NONE, out["causes"][:2]
 
 
@@ -284,6 +284,6 @@ def test_clean_record_gives_none_with_the_new_vocabulary(case):
     """Clean dahl (and dahl+voltage_dependence) records of several seeds: none of the larger vocabulary passes."""
     kind, commanded, seed = case
     rec, base = hidden_record(kind, None, seed=seed, commanded=commanded)
-    out = diagnose(rec, base, progress=False)
+    out = diagnose(rec, base, progress=False).to_dict()
     assert out["cause"] == NONE, out["causes"][:2]
     assert all(c["score"] is None or c["score"] <= THRESHOLD for c in out["causes"])

@@ -41,13 +41,13 @@ def _answer(out: dict) -> tuple:
 def _twice(record, search=None, *, other_tier: bool = False, monkeypatch=None) -> tuple[dict, dict]:
     """The diagnosis as it is, and perturbed (rounding, seed, one thread; with ``other_tier`` the inlined kernel)."""
     kwargs = {} if search is None else {"search": search}
-    first = diagnose(record, "dahl", progress=False, seed=0, **kwargs)
+    first = diagnose(record, "dahl", progress=False, seed=0, **kwargs).to_dict()
     threads = numba.get_num_threads()
     if other_tier:
         monkeypatch.setenv("BAYES_MR_KERNELS", "inlined")
     numba.set_num_threads(1)
     try:
-        second = diagnose(_rounded(record, 5), "dahl", progress=False, seed=1, **kwargs)
+        second = diagnose(_rounded(record, 5), "dahl", progress=False, seed=1, **kwargs).to_dict()
     finally:
         numba.set_num_threads(threads)
     return first, second

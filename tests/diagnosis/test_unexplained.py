@@ -66,7 +66,7 @@ def stroke_damping_record(seed: int, share: float = 0.3):
 
 
 def test_a_term_outside_the_vocabulary_is_reported_as_such():
-    out = diagnose(stroke_damping_record(seed=3), "dahl", progress=False, terms=False)
+    out = diagnose(stroke_damping_record(seed=3), "dahl", progress=False, terms=False).to_dict()
     assert out["unexplained_ratio"] > 3 * FLOOR_RATIO
     assert not out["at_noise_floor"]
     if out["cause"] == NONE:
@@ -80,7 +80,7 @@ def test_a_term_outside_the_vocabulary_is_reported_as_such():
 
 
 def test_clean_record_verdict_is_at_the_noise_floor():
-    out = diagnose(simulated_record("structure", "dahl", signal="blwn", seed=3), "dahl", progress=False)
+    out = diagnose(simulated_record("structure", "dahl", signal="blwn", seed=3), "dahl", progress=False).to_dict()
     assert out["cause"] == NONE and out["verdict"] == AT_FLOOR and out["at_noise_floor"]
     assert all(0.8 < r < 1.3 for r in _fitted_ratios(out["unexplained"]).values())
     json.dumps(out, allow_nan=False)
