@@ -18,7 +18,8 @@ def test_importing_and_drawing_leave_matplotlib_alone():
 import matplotlib
 matplotlib.use("svg")
 import bayes_mr.cli.commands, bayes_mr.run.job, bayes_mr.bench.benchmark, bayes_mr.diagnosis.diagnose
-from bayes_mr.report import diagnose, figures
+from bayes_mr.diagnosis import report as diagnose
+from bayes_mr.report import figures
 from bayes_mr.run import readme
 from bayes_mr.run import report as run
 import numpy as np, sys, tempfile, pathlib

@@ -1,10 +1,10 @@
 """The shape of the package, checked: no import cycle, imports go downward, modules and functions
 of a readable size (counted in code lines), no import-time side effects.
 
-The import graph is read from the source with :mod:`ast` (no import is executed), the
-same way ``audit.py`` of the redesign reads it: every ``import`` / ``from … import`` of a
-``bayes_mr`` module is an edge, including the ones inside functions (a lazy import is
-still a dependency), except those under ``if TYPE_CHECKING:`` (never run).
+The import graph is read from the source with :mod:`ast` (no import is executed): every
+``import`` / ``from … import`` of a ``bayes_mr`` module is an edge, including the ones inside
+functions (a lazy import is still a dependency) and those under ``if TYPE_CHECKING:`` (a type a
+module names is a dependency of its reader, and a cycle through one is still a knot to untie).
 """
 
 from __future__ import annotations
@@ -47,30 +47,11 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _is_type_checking(node: ast.If) -> bool:
-    test = node.test
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
-def _runtime_nodes(tree: ast.AST):
-    """Every node of ``tree`` except the bodies of ``if TYPE_CHECKING:`` blocks."""
-    todo = [tree]
-    while todo:
-        node = todo.pop()
-        yield node
-        for child in ast.iter_child_nodes(node):
-            if isinstance(child, ast.If) and _is_type_checking(child):
-                todo.extend(child.orelse)
-            else:
-                todo.append(child)
-
-
 def _imports(name: str, path: Path) -> set[str]:
     """The package modules that module ``name`` imports."""
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     out = set()
-    for node in _runtime_nodes(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".")[: len(package.split(".")) - (node.level - 1)]

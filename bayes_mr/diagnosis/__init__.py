@@ -8,6 +8,8 @@
 * :mod:`.extend`, :mod:`.fits` — the extended model fitted and measured on a part it never saw;
 * :mod:`.term_search`, :mod:`.library` — open-ended terms for what no named effect explains;
 * :mod:`.unexplained` — what remains against the record's noise floor;
+* :mod:`.ranking` — of the effects that pass, which explains the record, and which the record cannot tell apart;
+* :mod:`.report` — the figures and ``diagnose.md`` of a diagnosis;
 * :mod:`.measurement_chain` — a decimated record's anti-alias chain, applied to the prediction too.
 """
 

@@ -250,7 +250,7 @@ def _write(out: dict, record: xr.Dataset, models: tuple[Fit, Fit, Fit | None], b
 
     Returns the JSON keys of what was written and label → the InferenceData written."""
     from bayes_mr.inference import results
-    from bayes_mr.report.diagnose import write_report
+    from bayes_mr.diagnosis.report import write_report
 
     base, ext, term_fit = models
     paths = write_report(out, record, base, ext, before, after, rounds, out_dir)

@@ -70,7 +70,7 @@ def test_residual_figures_of_a_clean_record_show_the_baseline():
     import matplotlib
 
     matplotlib.use("Agg")
-    from bayes_mr.report.diagnose import crosscorr_figure, residual_binned_figure, whiteness_figure
+    from bayes_mr.diagnosis.report import crosscorr_figure, residual_binned_figure, whiteness_figure
     from bayes_mr.diagnosis.residuals import residual_views
     from bayes_mr.simulation.simulate import Inputs, simulate
 
