@@ -69,7 +69,7 @@ def row_of(rows: list[dict], model: str | None, engine: str) -> dict | None:
 
 def simulating_point(row: dict) -> dict[str, float]:
     """A row's parameters [SI] that simulate: its ``point`` (optimum or best draw) when it has one, else its
-    ``params`` (issue 14: a sloppy model's posterior mean need not simulate)."""
+    ``params`` (a sloppy model's posterior mean need not simulate)."""
     return row.get("point") or row["params"]
 
 
