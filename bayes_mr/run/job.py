@@ -36,9 +36,9 @@ command voltage, measured force):
 
 Everything is written to ``out_dir``: ``report.md`` with figures
 (:mod:`bayes_mr.run.report`), tables as CSV, every fit as netCDF and
-``summary.json``, which holds every number the README's run section shows
-(``scripts/update_readme.py`` writes that section; this module never
-touches the README).
+``summary.json``, which holds every number docs/results.md's run section shows
+(``scripts/update_readme.py`` copies it to docs/data/run.json and writes that
+section; this module never touches docs/).
 """
 
 from __future__ import annotations
@@ -249,7 +249,7 @@ def run(out_dir: str | Path = "results", *, quick: bool = False, seed: int = 0, 
     """The main job. Returns the summary written to ``out_dir/summary.json``.
 
     The summary's ``full_job`` is true for the full budget on the packaged
-    record: the run whose numbers the README shows (``scripts/update_readme.py``).
+    record: the run whose numbers docs/results.md shows (``scripts/update_readme.py``).
 
     Parameters
     ----------
