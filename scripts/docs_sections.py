@@ -139,13 +139,15 @@ def bench_section(r: dict) -> str:
     rel = r.get("train_best_rel_error", {})
     worst = max(rel.values()) if rel else float("nan")
     rows = [
-        ("UKF, ours (a training's LHS priors at once, all cores), per run and sample filtered", f"{r['ukf_us_per_step']:.2f} µs"),
+        ("UKF, ours (a training's LHS priors at once, all cores), per run and sample filtered",
+         f"{r['ukf_us_per_step']:.2f} µs"),
         ("UKF, ours (one run, one thread), per sample", f"{r['ukf_us_per_step_single']:.2f} µs"),
         ("filterpy UnscentedKalmanFilter, model in Python, per sample", f"{r['filterpy_us_per_step']:.0f} µs"),
         ("filterpy with our compiled model step, per sample", f"{r['filterpy_compiled_fx_us_per_step']:.0f} µs"),
         ("speedup (as used / like for like)", f"{r['speedup']:.0f}× / {r['speedup_single']:.0f}×"),
         ("largest state difference from filterpy", f"{r['max_state_diff']:.1e} standard deviations"),
-        (f"thesis-size training (every LHS prior × dispersion), dahl, thesis signal I ({r['train_samples']} samples)", f"{r['train_100_priors_s']:.1f} s"),
+        (f"thesis-size training (every LHS prior × dispersion), dahl, thesis signal I ({r['train_samples']} "
+         "samples)", f"{r['train_100_priors_s']:.1f} s"),
         ("trained fraction", f"{100 * r['trained_fraction']:.0f} %"),
         ("best trained run, largest parameter error", f"{100 * worst:.2f} %"),
         (f"least squares, {r['mcmc_record']}", f"{r['lsq_s']:.1f} s"),
@@ -161,7 +163,8 @@ def bench_section(r: dict) -> str:
                    f"NOT converged: stopped on its {STOP_REASONS.get(r.get('boucwen_mcmc_stopped'), 'budget')}"
                    f"{chain_shape(r.get('boucwen_mcmc_geometry'))}")
         rows += [(f"least squares, bouc-wen, {r['boucwen_record']}, {r['boucwen_input_interp']} inputs "
-                  f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)", f"{r['boucwen_lsq_s']:.0f} s"),
+                  f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)",
+                  f"{r['boucwen_lsq_s']:.0f} s"),
                  (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, τ_max "
                   f"{r['boucwen_mcmc_tau_max']:.0f}, R-hat_max {r['boucwen_mcmc_rhat_max']:.3f}, mean within "
                   f"{r['boucwen_mcmc_max_z']:.2g} sd ({verdict})", f"{r['boucwen_mcmc_s']:.0f} s")]
@@ -203,6 +206,8 @@ def study_section(name: str, summary: dict, figures: Path | None = None) -> str:
     title, what = STUDIES[name]
     report = study_module(name).markdown(summary).splitlines()
     if report and report[0].startswith("# "):
+        report = report[1:]
+    while report and not report[0].strip():
         report = report[1:]
     body = []
     for line in report:

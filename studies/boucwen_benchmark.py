@@ -193,7 +193,8 @@ def markdown(summary: dict) -> str:
     lines = ["# The Bouc–Wen hysteretic benchmark", "",
              "The benchmark's published test sets are **not shipped**; every held-out figure below is a held-out "
              "period of the training record.", "",
-             f"## Five forms × {', '.join(summary['engines'])}", "", markdown_table(pd.DataFrame(summary["forms"])), "",
+             f"## Five forms × {', '.join(summary['engines'])}", "",
+             markdown_table(pd.DataFrame(summary["forms"])), "",
              _selection_line(summary, summary["compare_s"]), "",
              "## `bouc-wen` parameters against the benchmark's true values", "",
              markdown_table(pd.DataFrame(summary["parameters"])), "",
