@@ -268,7 +268,7 @@ def cmd_run(args) -> int:
 
 def studies_dir() -> Path:
     """The ``studies/`` folder of the source tree this package runs from."""
-    return Path(__file__).resolve().parents[1] / "studies"
+    return Path(__file__).resolve().parents[2] / "studies"
 
 
 def study_names() -> list[str]:

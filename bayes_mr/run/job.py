@@ -53,6 +53,7 @@ import xarray as xr
 from bayes_mr.inference import results
 from bayes_mr.selection.comparison import choose, compare, table
 from bayes_mr.inference.identify import UKF
+from bayes_mr.inference.mcmc.sampler import MCMCSettings
 from bayes_mr.run.aside import Stage, run_stages, start
 from bayes_mr.run.context import noise_sensitivity, published_spencer
 from bayes_mr.run.posteriors import least_squares_pass, posterior_order, run_posteriors
