@@ -100,7 +100,9 @@ def run_section(summary: dict, links: dict[str, str] | None = None) -> str:
         for key in RUN_FIGURES:
             if key in links:
                 lines += [f"![{key}]({links[key]})", ""]
-    lines += ["", f"Written by `bayes-mr run` in {summary['wall_s'] / 60:.1f} min; data: "
+    else:
+        lines.append("")
+    lines += [f"Written by `bayes-mr run` in {summary['wall_s'] / 60:.1f} min; data: "
               "[`data/run.json`](data/run.json), full report of that run: `results/report.md`."]
     return "\n".join(lines).rstrip() + "\n"
 
