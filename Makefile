@@ -12,7 +12,8 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
-# the commands write only under results/; the script then writes README.md's measured sections from their JSON
+# the commands write only under results/; the script then copies their JSON into docs/data/ and rewrites
+# docs/results.md and docs/performance.md from docs/data/ (`python scripts/update_readme.py all`: no run)
 run: $(STAMP)
 	$(BIN)/bayes-mr run --out results
 	$(BIN)/python scripts/update_readme.py run --out results
@@ -23,8 +24,10 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
 
+# on a quiet machine; BENCH_FLAGS="--boucwen --compare" adds the Bouc–Wen benchmark fit and the compare timing
+BENCH_FLAGS ?=
 bench: $(STAMP)
-	$(BIN)/bayes-mr bench --json results/bench.json
+	$(BIN)/bayes-mr bench $(BENCH_FLAGS) --json results/bench.json
 	$(BIN)/python scripts/update_readme.py bench --json results/bench.json
 
 clean:

@@ -28,6 +28,7 @@
 # %%
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -35,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bayes_mr.inference.results import write_json
 from bayes_mr.selection.comparison import compare
 from bayes_mr.models import get_model
 from bayes_mr.report import figures
@@ -60,6 +62,8 @@ RESIDUALS = ("iid", "ar")
 PER_FORM = 6
 #: Truth draws (and noise seeds) per hidden effect × signal.
 HIDDEN_SEEDS = 2
+#: A hidden-effect record's seed is its seed + SIGNAL_STRIDE × its signal's index.
+SIGNAL_STRIDE = 10
 
 
 def signal(name: str, fs: float, duration: float):
@@ -107,7 +111,7 @@ def hidden_rows(seeds, rates, duration: float, hidden: dict = HIDDEN, signals=SI
     for form, extra in hidden.items():
         for i, sig_name in enumerate(signals):
             for s in seeds:
-                seed = s + 10 * i  # each signal its own truth draw and noise
+                seed = s + SIGNAL_STRIDE * i  # each signal its own truth draw and noise
                 theta = truth(form, seed, extra)
                 for fs in rates:
                     rec = record(form, theta, sig_name, fs, seed, duration)
@@ -186,36 +190,48 @@ def main(out_dir: str | Path = "results/studies/bayes-factor-rate", quick: bool 
     true = true_rows([seed] if quick else [seed + i for i in range(PER_FORM)], TRUE_RATES, duration, executor)
     hidden.to_csv(out / "hidden_rows.csv", index=False)
     true.to_csv(out / "true_rows.csv", index=False)
-    return report(out, hidden, true, time.perf_counter() - t0, seed=seed, seeds=seeds, duration=duration)
+    return report(out, hidden, true, time.perf_counter() - t0, seed=seed, seeds=seeds, duration=duration,
+                  quick=quick)
 
 
 def report(out: Path, hidden: pd.DataFrame, true: pd.DataFrame, wall: float, *, seed: int, seeds,
-           duration: float) -> dict:
-    """``report.md``, its figure and the summary from the rows (also to rebuild them from the CSVs)."""
+           duration: float, quick: bool = False) -> dict:
+    """``summary.json``, ``report.md`` and its figure from the rows (also to rebuild them from the CSVs)."""
     rates = sorted(hidden["fs"].unique())
     growth, ratios, sel = growth_table(hidden), ratio_table(hidden), selection_table(true)
     _figure(hidden, out / "ln_bf_vs_rate.png")  # beside report.md: scripts/update_readme.py study copies it
     per_res = ratios.groupby("residual")[["raw", "calibrated"]].median()
+    summary = {"quick": quick, "wall_s": wall, "rates_hz": list(rates), "duration_s": duration, "noise": NOISE,
+               "seed": seed, "seeds": list(seeds), "signal_stride": SIGNAL_STRIDE,
+               "true_seeds": sorted(true["seed"].unique().tolist()),
+               "growth": growth.to_dict(orient="records"),
+               "ratio_top_over_lowest": ratios.to_dict(orient="records"),
+               "median_ratio": per_res.to_dict(orient="index"), "true_selection": sel.to_dict(orient="records")}
+    # report.md is built from the JSON as written, so it shows nothing the JSON does not hold
+    summary = json.loads(write_json(summary, out / "summary.json").read_text())
+    (out / "report.md").write_text(markdown(summary))
+    return {"report": str(out / "report.md"), **summary}
+
+
+def markdown(summary: dict) -> str:
+    """``report.md`` from the study's ``summary.json`` (every number in it is a field of that JSON)."""
+    rates, per_res, true_seeds = summary["rates_hz"], summary["median_ratio"], summary["true_seeds"]
     lines = ["# Bayes factors against the sampling rate", "",
-             f"Least squares (Laplace route) through `compare`; structure tests of {duration:g} s, "
-             f"{100 * NOISE:g} % RMS noise per sample on the input and both outputs, recorded at "
-             f"{', '.join(f'{r:g}' for r in rates)} Hz; hidden-effect records: seeds {seeds} + 10 × signal index "
-             f"(truth draw and noise); true-candidate records: seeds {seed}…{seed + true['seed'].nunique() - 1} "
-             f"per form. Wall time {wall / 60:.1f} min.", "",
+             f"Least squares (Laplace route) through `compare`; structure tests of {summary['duration_s']:g} s, "
+             f"{100 * summary['noise']:g} % RMS noise per sample on the input and both outputs, recorded at "
+             f"{', '.join(f'{r:g}' for r in rates)} Hz; hidden-effect records: seeds {summary['seeds']} + "
+             f"{summary['signal_stride']} × signal index (truth draw and noise); true-candidate records: seeds "
+             f"{true_seeds[0]}…{true_seeds[-1]} per form. Wall time {summary['wall_s'] / 60:.1f} min.", "",
              "### No true candidate (a hidden effect): ln Z(dahl) − ln Z(normalized-bouc-wen)", "",
-             markdown_table(growth), "",
+             markdown_table(pd.DataFrame(summary["growth"])), "",
              f"Per record, |ln BF| at {max(rates):g} Hz over |ln BF| at {min(rates):g} Hz (median): " +
-             "; ".join(f"{res}: raw ×{per_res.loc[res, 'raw']:.3g}, calibrated ×{per_res.loc[res, 'calibrated']:.3g}"
-                       for res in per_res.index) + ".", "",
-             markdown_table(ratios), "",
+             "; ".join(f"{res}: raw ×{v['raw']:.3g}, calibrated ×{v['calibrated']:.3g}" for res, v in per_res.items())
+             + ".", "",
+             markdown_table(pd.DataFrame(summary["ratio_top_over_lowest"])), "",
              "![ln BF against the rate](ln_bf_vs_rate.png)", "",
              "### A true candidate: share of records whose true form is selected", "",
-             markdown_table(sel), ""]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    return {"report": str(out / "report.md"), "wall_s": wall, "rates_hz": list(rates), "duration_s": duration,
-            "noise": NOISE, "seeds": seeds, "growth": growth.to_dict(orient="records"),
-            "ratio_top_over_lowest": ratios.to_dict(orient="records"),
-            "median_ratio": per_res.to_dict(orient="index"), "true_selection": sel.to_dict(orient="records")}
+             markdown_table(pd.DataFrame(summary["true_selection"])), ""]
+    return "\n".join(lines) + "\n"
 
 
 def _figure(rows: pd.DataFrame, path: Path) -> None:

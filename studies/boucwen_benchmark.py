@@ -25,6 +25,7 @@
 # %%
 from __future__ import annotations
 
+import json
 import sys
 import time as _time
 from pathlib import Path
@@ -33,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from bayes_mr.inference import results
+from bayes_mr.inference.results import write_json
 from bayes_mr.selection.comparison import compare
 from bayes_mr.data import load_packaged
 from bayes_mr.inference.identify import Identify, LeastSquares, predict, validate
@@ -123,20 +125,19 @@ def _figures(fig_dir: Path, rec, idata, held_out: int) -> None:
                  fig_dir / "hysteresis.png")
 
 
-def _selection_line(cmp, compare_s: float) -> str:
-    """The verdict in words of a Comparison: the model, the route, its ln Bayes factor over the runner-up, raw and
-    calibrated."""
+def _selection_line(cmp: dict, compare_s: float) -> str:
+    """The verdict in words: the model, the route, its ln Bayes factor over the runner-up, raw and calibrated."""
     def runner_up(factors: dict) -> str:
-        rest = {m: f for m, f in factors.items() if m != cmp.selected}
+        rest = {m: f for m, f in factors.items() if m != cmp["selected"]}
         m = min(rest, key=rest.get)
         return f"{rest[m]:.4g} over {m}"
 
-    line = f"Selected by the {cmp.selected_by or 'evidence'}: **{cmp.selected}**"
-    if cmp.bayes_factors_calibrated:
-        line += (f", ln BF {runner_up(cmp.bayes_factors_calibrated)} (likelihood raised to the pooled "
-                 f"k̄ = {cmp.data['evidence_scale']:.3g})")
-    if cmp.bayes_factors:
-        line += f"; the raw evidence's ln BF {runner_up(cmp.bayes_factors)}"
+    line = f"Selected by the {cmp.get('selected_by') or 'evidence'}: **{cmp['selected']}**"
+    if cmp.get("bayes_factors_calibrated"):
+        line += (f", ln BF {runner_up(cmp['bayes_factors_calibrated'])} (likelihood raised to the pooled "
+                 f"k̄ = {cmp['evidence_scale']:.3g})")
+    if cmp.get("bayes_factors"):
+        line += f"; the raw evidence's ln BF {runner_up(cmp['bayes_factors'])}"
     return line + f". The comparison took {compare_s / 60:.1f} min on this machine."
 
 
@@ -173,23 +174,35 @@ def main(out_dir: str | Path = "results/studies/boucwen-benchmark", quick: bool 
                           {"method": "bouc-wen, least squares (this package)", "reference": "this study (check)",
                            "multisine test RMSE [m]": cv_rows[-1]["RMSE vs true system [m]"],
                            "scored on": f"held-out period {held_out[-1]}: the true system's noise-free output"}])
+    summary = {"quick": quick, "engines": list(engines), "held_out_periods": list(held_out),
+               "selected": cmp.selected, "selected_by": cmp.selected_by,
+               "bayes_factors": cmp.bayes_factors, "bayes_factors_calibrated": cmp.bayes_factors_calibrated,
+               "evidence_scale": cmp.to_dict().get("evidence_scale"), "held_out_rmse": ours,
+               "held_out_rmse_vs_truth": cv_rows[-1]["RMSE vs true system [m]"], "compare_s": compare_s,
+               "forms": forms.to_dict(orient="records"), "parameters": params.to_dict(orient="records"),
+               "max_abs_z": {e: float(params[params.engine == e]["|z|"].max()) for e in fits},
+               "cross_validation": cv_rows, "published": lit.to_dict(orient="records")}
+    # report.md is built from the JSON as written, so it shows nothing the JSON does not hold
+    summary = json.loads(write_json(summary, out / "summary.json").read_text())
+    (out / "report.md").write_text(markdown(summary))
+    return {"report": str(out / "report.md"), **summary}
+
+
+def markdown(summary: dict) -> str:
+    """``report.md`` from the study's ``summary.json`` (every number in it is a field of that JSON)."""
     lines = ["# The Bouc–Wen hysteretic benchmark", "",
              "The benchmark's published test sets are **not shipped**; every held-out figure below is a held-out "
              "period of the training record.", "",
-             f"## Five forms × {', '.join(engines)}", "", markdown_table(forms), "",
-             _selection_line(cmp, compare_s), "",
-             "## `bouc-wen` parameters against the benchmark's true values", "", markdown_table(params), "",
-             "## Cross-validation on held-out periods (steady state)", "", markdown_table(cv), "",
-             "## Published test RMSEs beside ours", "", markdown_table(lit), "",
+             f"## Five forms × {', '.join(summary['engines'])}", "",
+             markdown_table(pd.DataFrame(summary["forms"])), "",
+             _selection_line(summary, summary["compare_s"]), "",
+             "## `bouc-wen` parameters against the benchmark's true values", "",
+             markdown_table(pd.DataFrame(summary["parameters"])), "",
+             "## Cross-validation on held-out periods (steady state)", "",
+             markdown_table(pd.DataFrame(summary["cross_validation"])), "",
+             "## Published test RMSEs beside ours", "", markdown_table(pd.DataFrame(summary["published"])), "",
              "![spectra](figures/spectra.png) ![loop](figures/hysteresis.png)"]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    return {"report": str(out / "report.md"), "selected": cmp.selected, "selected_by": cmp.selected_by,
-            "bayes_factors": cmp.bayes_factors, "bayes_factors_calibrated": cmp.data.get("bayes_factors_calibrated"),
-            "held_out_rmse": ours,
-            "held_out_rmse_vs_truth": cv_rows[-1]["RMSE vs true system [m]"], "compare_s": compare_s,
-            "forms": forms.to_dict(orient="records"), "parameters": params.to_dict(orient="records"),
-            "max_abs_z": {e: float(params[params.engine == e]["|z|"].max()) for e in fits},
-            "cross_validation": cv_rows}
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@
 # %%
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -40,6 +41,7 @@ import pandas as pd
 from scipy import stats
 
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares
+from bayes_mr.inference.results import write_json
 from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
@@ -214,26 +216,38 @@ def main(out_dir: str | Path = "results/studies/coverage", quick: bool = False, 
     _figure(rows, out / "figures" / "z_scores.png")
     wall = time.perf_counter() - t0
     overall = table[table["form"] == "all"]
-    lines = ["# Coverage of the reported 90 % intervals", "",
-             f"{len(members)} simulated structure tests ({n} per form), {FS:g} Hz × {DURATION:g} s, "
-             f"{100 * NOISE_RANGE[0]:g}–{100 * NOISE_RANGE[1]:g} % RMS noise on the input and the outputs; "
-             f"one row per true parameter value. Wall time {wall / 60:.1f} min.", "",
-             "## Every form", "", markdown_table(overall.drop(columns="form")), "",
-             "## Per form", "", markdown_table(table[table["form"] != "all"]), "",
+    summary = {"quick": quick, "level": LEVEL, "n_members": len(members), "n_devices": len(devices), "wall_s": wall,
+               "failed": failed,
+               "records": {"fs_hz": FS, "duration_s": DURATION, "noise_range": list(NOISE_RANGE),
+                           "signals": list(SIGNALS), "truth_spread": TRUTH_SPREAD, "per_form": n},
+               "budgets": {"mcmc": "stop at 20 tau or 3000 steps, R-hat < 1.1, evidence by Laplace",
+                           "ukf": "3 LHS x tau (0.1, 0.5) priors, then the engine's refinement passes"},
+               "coverage": overall.drop(columns="form").to_dict(orient="records"),
+               "device_coverage": device.to_dict(orient="records"),
+               "per_form": table[table["form"] != "all"].to_dict(orient="records")}
+    # report.md is built from the JSON as written, so it shows nothing the JSON does not hold
+    summary = json.loads(write_json(summary, out / "summary.json").read_text())
+    (out / "report.md").write_text(markdown(summary))
+    return {"report": str(out / "report.md"), **summary}
+
+
+def markdown(summary: dict) -> str:
+    """``report.md`` from the study's ``summary.json`` (every number in it is a field of that JSON)."""
+    rec = summary["records"]
+    lo, hi = rec["noise_range"]
+    lines = [f"# Coverage of the reported {100 * summary['level']:g} % intervals", "",
+             f"{summary['n_members']} simulated structure tests ({rec['per_form']} per form), {rec['fs_hz']:g} Hz × "
+             f"{rec['duration_s']:g} s, {100 * lo:g}–{100 * hi:g} % RMS noise on the input and the outputs; "
+             f"one row per true parameter value. Wall time {summary['wall_s'] / 60:.1f} min.", "",
+             "## Every form", "", markdown_table(pd.DataFrame(summary["coverage"])), "",
+             "## Per form", "", markdown_table(pd.DataFrame(summary["per_form"])), "",
              "![z-scores](figures/z_scores.png)", "",
              "## Device tests", "",
-             f"{len(devices)} simulated device tests of a dahl damper (its measured displacement and velocity "
-             f"drive the model), same rate, length and noise range.", "", markdown_table(device), "",
-             "Failed fits (not counted): " + ("; ".join(failed) if failed else "none") + "."]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    return {"report": str(out / "report.md"), "n_members": len(members), "wall_s": wall, "failed": failed,
-            "records": {"fs_hz": FS, "duration_s": DURATION, "noise_range": list(NOISE_RANGE),
-                        "signals": list(SIGNALS), "truth_spread": TRUTH_SPREAD, "per_form": n},
-            "budgets": {"mcmc": "stop at 20 tau or 3000 steps, R-hat < 1.1, evidence by Laplace",
-                        "ukf": "3 LHS x tau (0.1, 0.5) priors, then the engine's refinement passes"},
-            "coverage": overall.drop(columns="form").to_dict(orient="records"),
-            "device_coverage": device.to_dict(orient="records"),
-            "per_form": table[table["form"] != "all"].to_dict(orient="records")}
+             f"{summary['n_devices']} simulated device tests of a dahl damper (its measured displacement and "
+             f"velocity drive the model), same rate, length and noise range.", "",
+             markdown_table(pd.DataFrame(summary["device_coverage"])), "",
+             "Failed fits (not counted): " + ("; ".join(summary["failed"]) if summary["failed"] else "none") + "."]
+    return "\n".join(lines) + "\n"
 
 
 def _figure(rows: pd.DataFrame, path: Path) -> None:

@@ -35,6 +35,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bayes_mr.inference import results  # noqa: E402
+from bayes_mr.inference.results import write_json  # noqa: E402
 from bayes_mr.diagnosis.extend import extend  # noqa: E402
 from bayes_mr.inference.identify import Identify, LeastSquares, predict  # noqa: E402
 from bayes_mr.run.job import FULL, QUICK, prepare  # noqa: E402
@@ -74,7 +75,8 @@ def figure(part_b, base_theta: dict, ext_model: str, ext_theta: dict, base_model
     plt.close(fig)
 
 
-def _markdown(out: dict) -> str:
+def markdown(out: dict) -> str:
+    """``report.md`` from the study's ``summary.json`` (every number in it is a field of that JSON)."""
     ext = out["extension"]
     rows = ["| step | kept | score | part A NRMSE | part B NRMSE |", "|---|---|---|---|---|",
             f"| {ext['base']['model']} (base) | | | {ext['base']['force_nrmse_a']:.4f} | "
@@ -117,8 +119,9 @@ def main(out_dir: str | Path = "results/studies/damper-extension", quick: bool =
     ext = extend(part_a, part_b, (model, base_theta), rank=True, seed=seed, progress=say)
     figure(part_b, ext["base"]["params"], ext["extended"]["model"], ext["extended"]["params"], model,
            out_dir / "extension_part_b.png")
-    out = {"record": info, "model": model, "extension": ext, "wall_s": time.perf_counter() - t0}
-    (out_dir / "summary.json").write_text(json.dumps(out, indent=1, default=float))
-    (out_dir / "report.md").write_text(_markdown(out))
+    out = {"quick": quick, "record": info, "model": model, "extension": ext, "wall_s": time.perf_counter() - t0}
+    # report.md is built from the JSON as written, so it shows nothing the JSON does not hold
+    out = json.loads(write_json(out, out_dir / "summary.json").read_text())
+    (out_dir / "report.md").write_text(markdown(out))
     say(f"written {out_dir / 'report.md'}")
     return out

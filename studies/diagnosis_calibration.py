@@ -87,7 +87,7 @@ def _row(fam, case, directory: Path, say) -> dict:
     assert not [k for k in record.attrs if k.startswith("noise_sd")]
     t1 = time.perf_counter()
     try:
-        out = bm.diagnose(record, case.form, progress=False)
+        out = bm.diagnose(record, case.form, progress=False).to_dict()
     except Exception as exc:  # a failure is a row, not the end of the study
         say(f"{case.label}: failed ({exc})")
         return {"record": case.label, "form": case.form, "kind": case.kind, "expected": case.expected,
@@ -165,29 +165,39 @@ def main(out_dir: str | Path = "results/studies/diagnosis-calibration", quick: b
         "quick": quick, "wall_s": round(wall, 1),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    (out / "report.md").write_text(markdown(summary))
+    return summary
 
-    def fmt(rate):
-        lo, hi = rate["ci90"]
-        return f"{rate['k']}/{rate['n']} ({lo:.2f}–{hi:.2f})" if lo is not None else "–"
 
-    table = [{"threshold": f"package {THRESHOLD:g}", "false alarms (B)": fmt(at_package["false_alarm"]),
-              "detections (B)": fmt(at_package["detection"])}]
+def _fmt(rate: dict) -> str:
+    lo, hi = rate["ci90"]
+    return f"{rate['k']}/{rate['n']} ({lo:.2f}–{hi:.2f})" if lo is not None else "–"
+
+
+def markdown(summary: dict) -> str:
+    """The study's report, from its summary alone (``docs/results.md`` shows the same text)."""
+    rec, rows = summary["records"], summary["rows"]
+    at_package, at_calibrated = summary["at_package_threshold"], summary["at_calibrated_threshold"]
+    calibrated = summary["calibrated_threshold"]
+    table = [{"threshold": f"package {summary['package_threshold']:g}", "false alarms (B)": _fmt(at_package["false_alarm"]),
+              "detections (B)": _fmt(at_package["detection"])}]
     if at_calibrated:
-        table.append({"threshold": f"calibrated {calibrated:.3g}", "false alarms (B)": fmt(at_calibrated["false_alarm"]),
-                      "detections (B)": fmt(at_calibrated["detection"])})
+        table.append({"threshold": f"calibrated {calibrated:.3g}", "false alarms (B)": _fmt(at_calibrated["false_alarm"]),
+                      "detections (B)": _fmt(at_calibrated["detection"])})
+    every = rows["a"] + rows["b_clean"] + rows["b_hidden"]
     per_record = [{"record": r["record"], "expected": r["expected"], "cause": r.get("cause", r.get("error")),
-                   "best": r.get("best"), "score": r.get("best_score")} for r in rows_a + rows_clean + rows_hidden]
+                   "best": r.get("best"), "score": r.get("best_score")} for r in every]
     lines = ["# diagnose's threshold on records of an independent simulator", "",
-             f"Records {size['duration']:g} s at {size['fs']:g} Hz, CSV read by `bm.load` (noise floors estimated). "
-             f"Set A: {len(rows_a)} clean records; set B: {len(rows_clean)} clean, {len(rows_hidden)} with one "
-             f"hidden effect. Wall time {wall / 60:.1f} min.", "",
+             f"Records {rec['duration']:g} s at {rec['fs']:g} Hz, CSV read by `bm.load` (noise floors estimated). "
+             f"Set A: {len(rows['a'])} clean records; set B: {len(rows['b_clean'])} clean, {len(rows['b_hidden'])} "
+             f"with one hidden effect. Wall time {summary['wall_s'] / 60:.1f} min.", "",
              f"Rule: {summary['rule']}. Calibrated threshold: "
-             + (f"{calibrated:.3g}" if calibrated is not None else "none") + f" (package: {THRESHOLD:g}).", "",
+             + (f"{calibrated:.3g}" if calibrated is not None else "none")
+             + f" (package: {summary['package_threshold']:g}).", "",
              "Rates on B with Clopper–Pearson 90 % intervals:", "", markdown_table(pd.DataFrame(table)), "",
              "## Every record", "", markdown_table(pd.DataFrame(per_record)), "",
              "Failed: " + (", ".join(summary["failed"]) or "none") + "."]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    return summary
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

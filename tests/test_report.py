@@ -1,4 +1,4 @@
-"""The reporting layer: no global matplotlib state touched, README sections built from JSON by the script."""
+"""The reporting layer: no global matplotlib state touched; docs/ sections built from JSON by the script."""
 
 import importlib.util
 import json
@@ -7,9 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bayes_mr.run.readme import bench_section, run_section
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+
+from docs_sections import bench_section, run_section  # noqa: E402
 
 
 def test_importing_and_drawing_leave_matplotlib_alone():
@@ -20,9 +21,10 @@ matplotlib.use("svg")
 import bayes_mr.cli.commands, bayes_mr.run.job, bayes_mr.bench.benchmark, bayes_mr.diagnosis.diagnose
 from bayes_mr.diagnosis import report as diagnose
 from bayes_mr.report import figures
-from bayes_mr.run import readme
 from bayes_mr.run import report as run
 import numpy as np, sys, tempfile, pathlib
+sys.path.insert(0, "scripts")
+import docs_sections
 t = np.linspace(0, 1, 50)
 figures.save(figures.time_series(t, {"x": {"a": t}}), pathlib.Path(tempfile.mkdtemp()) / "f.png")
 import matplotlib.pyplot as plt
@@ -50,16 +52,15 @@ BENCH = {"ukf_model": "dahl (structure test, 7 augmented states, thesis signal I
          "diagnose_mse_ratio": 0.007, "diagnose_record": "dahl + 2 N force offset hidden, 30 s at 1000 Hz"}
 
 
-def test_bench_section_is_written_between_the_markers_only(tmp_path):
-    readme = tmp_path / "README.md"
-    readme.write_text("# title\n\n<!-- bench:start -->\nold\n<!-- bench:end -->\n\nafter\n")
+def test_bench_json_becomes_the_performance_page(tmp_path):
+    """A bench file written before the kernel, Bouc–Wen and compare figures still makes a page."""
+    docs = tmp_path / "docs"
     bench = tmp_path / "bench.json"
     bench.write_text(json.dumps(BENCH))
-    assert _script().main(["bench", "--json", str(bench), "--readme", str(readme)]) == 0
-    text = readme.read_text()
-    assert text.startswith("# title\n\n<!-- bench:start -->\n| measured | value |") and text.endswith("\n\nafter\n")
-    assert "| speedup (as used / like for like) | 188× / 108× |" in text and "old" not in text
-    assert bench_section(BENCH) in text
+    assert _script().main(["bench", "--json", str(bench), "--docs", str(docs)]) == 0
+    text = (docs / "performance.md").read_text()
+    assert "| speedup (as used / like for like) | 188× / 108× |" in text
+    assert bench_section(BENCH) in text and json.loads((docs / "data" / "bench.json").read_text()) == BENCH
 
 
 def _summary(out: Path) -> dict:
@@ -81,38 +82,43 @@ def test_run_section_from_the_summary_json(tmp_path):
     out.mkdir()
     summary = _summary(out)
     (out / "summary.json").write_text(json.dumps(summary))
-    readme = tmp_path / "README.md"
-    readme.write_text("<!-- run:start -->\n<!-- run:end -->\n")
-    assert _script().main(["run", "--out", str(out), "--readme", str(readme)]) == 0
-    assert (tmp_path / "figures" / "run_force_part_b.png").read_bytes() == b"png"
-    text = readme.read_text()
-    assert run_section(summary, out, {"force_b": "figures/run_force_part_b.png"}) in text
+    docs = tmp_path / "docs"
+    assert _script().main(["run", "--out", str(out), "--docs", str(docs)]) == 0
+    assert (docs / "figures" / "run_force_part_b.png").read_bytes() == b"png"
+    text = (docs / "results.md").read_text()
+    assert run_section(summary, {"force_b": "figures/run_force_part_b.png"}) in text
     assert "Selected by laplace evidence: **dahl**." in text and "in 12.3 min" in text
     assert "shake_table" not in text  # its PNG does not exist: no broken link
 
 
-def test_a_quick_run_leaves_the_readme_alone(tmp_path):
+def test_a_quick_run_leaves_docs_alone(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     (out / "summary.json").write_text(json.dumps({**_summary(out), "full_job": False}))
-    readme = tmp_path / "README.md"
-    readme.write_text("<!-- run:start -->\nkept\n<!-- run:end -->\n")
-    _script().main(["run", "--out", str(out), "--readme", str(readme)])
-    assert "kept" in readme.read_text() and not (tmp_path / "figures").exists()
+    docs = tmp_path / "docs"
+    _script().main(["run", "--out", str(out), "--docs", str(docs)])
+    assert not docs.exists()
 
 
-def test_study_section_copies_its_report_and_figures(tmp_path):
+def test_study_section_renders_its_summary_json(tmp_path):
     out = tmp_path / "results" / "studies" / "damper-extension"
     out.mkdir(parents=True)
-    (out / "report.md").write_text("# Title\n\nAdded: inertia.\n\n![part B](extension_part_b.png)\n")
+    step = {"effect": "inertia", "kept": True, "score": 1139.0, "force_nrmse_a": 0.1226, "force_nrmse_b": 0.1278}
+    summary = {"quick": False, "model": "spencer", "wall_s": 63.0,
+               "record": {"source": "nees-ranran-50", "part_a_s": 13.0, "part_b_s": 8.6, "fs": 1001.6},
+               "extension": {"base": {"model": "spencer", "force_nrmse_a": 0.1768, "force_nrmse_b": 0.1767},
+                             "steps": [step], "added": ["inertia"], "unexplained_ratio_b": 79.5,
+                             "extended": {"model": "spencer+inertia", "force_nrmse_a": 0.1226,
+                                          "force_nrmse_b": 0.1278}}}
+    (out / "summary.json").write_text(json.dumps(summary))
     (out / "extension_part_b.png").write_bytes(b"png")
-    readme = tmp_path / "README.md"
-    readme.write_text("x\n<!-- damper-extension:start -->\nold\n<!-- damper-extension:end -->\ny\n")
-    assert _script().main(["study", "damper-extension", "--out", str(out), "--readme", str(readme)]) == 0
-    text = readme.read_text()
-    assert "Added: inertia." in text and "old" not in text and "# Title" not in text
+    docs = tmp_path / "docs"
+    assert _script().main(["study", "damper-extension", "--out", str(out), "--docs", str(docs)]) == 0
+    text = (docs / "results.md").read_text()
+    assert "Added: inertia." in text and "# Extending" not in text and "identifies `spencer`" in text
+    assert "| **spencer+inertia** | | | 0.1226 | **0.1278** |" in text
     assert "![part B](figures/damper-extension_extension_part_b.png)" in text
-    assert (tmp_path / "figures" / "damper-extension_extension_part_b.png").read_bytes() == b"png"
+    assert (docs / "figures" / "damper-extension_extension_part_b.png").read_bytes() == b"png"
 
 
 def test_the_headline_says_which_posterior_did_not_converge_and_why():

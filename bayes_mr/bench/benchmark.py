@@ -23,8 +23,8 @@
   distance of the estimate from the benchmark's true values in posterior SDs.
 
 :func:`run_bench` returns every number; ``bayes-mr bench --json F`` writes
-them to ``F`` and nothing else (``scripts/update_readme.py`` builds the
-README's bench section from that file, :func:`bayes_mr.run.readme.bench_section`).
+them to ``F`` and nothing else (``scripts/update_readme.py bench`` copies that file to
+docs/data/bench.json and builds docs/performance.md from it, ``scripts/docs_sections.py``).
 """
 
 from __future__ import annotations

@@ -65,9 +65,9 @@ def _evidence_flag(p: argparse.ArgumentParser, where: str) -> None:
 
 
 def _no_readme_flag(p: argparse.ArgumentParser) -> None:
-    # kept so scripts and Makefiles written for earlier versions still run: the command never writes README.md
+    # kept so scripts and Makefiles written for earlier versions still run: the command never writes docs
     p.add_argument("--no-readme", action="store_true",
-                   help="accepted and ignored: README.md is written by scripts/update_readme.py, not by this command")
+                   help="accepted and ignored: docs/ is written by scripts/update_readme.py, not by this command")
 
 
 def _simulate_parser(sub, forms: str, effects: str) -> None:
@@ -206,8 +206,8 @@ def _job_parsers(sub) -> None:
     p = sub.add_parser("bench", help="the performance benchmark (UKF vs filterpy, training, MCMC, LSQ)",
                        description="Measure the UKF per step against filterpy on the same model and data, a "
                                    "100-prior training at the thesis's size, and MCMC/least-squares wall times; "
-                                   "writes the figures to --json only (make bench then writes README.md's "
-                                   "section with scripts/update_readme.py).")
+                                   "writes the figures to --json only (make bench then writes docs/performance.md "
+                                   "with scripts/update_readme.py).")
     p.add_argument("--json", metavar="OUT.json", help="write the figures here (default: stdout)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--boucwen", action="store_true",

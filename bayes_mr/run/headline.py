@@ -1,7 +1,7 @@
 """The main job's headline: the sentences a structural engineer reads first, each number from the run's summary.
 
 :func:`headline` builds them from the summary written to ``summary.json``
-(the README's run section and ``report.md`` both start with them);
+(docs/results.md's run section and ``report.md`` both start with them);
 :func:`diagnosis_sentence` and :func:`second_record_sentence` are also the
 report's sections' first lines.
 """

@@ -1,8 +1,8 @@
 """The main job's report (:func:`bayes_mr.run.job.run`): its figures and ``report.md`` (its headline: :mod:`.headline`).
 
 Every sentence and table is built from the run's summary (the dict written
-to ``summary.json``), so the README's run section (:mod:`.readme`) can be
-rebuilt from that file alone.
+to ``summary.json``), so the main job's section of docs/results.md (``scripts/docs_sections.py``)
+can be rebuilt from that file alone.
 """
 
 from __future__ import annotations

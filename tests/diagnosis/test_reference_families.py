@@ -63,13 +63,13 @@ CLEAN_DEFAULT = [("dahl-structure", 920), ("normalized-bouc-wen-device", 921), (
 @pytest.mark.parametrize("effect, seed", HIDDEN_DEFAULT, ids=[e for e, _ in HIDDEN_DEFAULT])
 def test_hidden_effect_in_a_lab_file_is_named(family_record, effect, seed):
     case = hidden_case(effect, seed, **DEFAULT)
-    _check_named(bm.diagnose(family_record(case), "dahl", progress=False), effect)
+    _check_named(bm.diagnose(family_record(case), "dahl", progress=False).to_dict(), effect)
 
 
 @pytest.mark.parametrize("name, seed", CLEAN_DEFAULT, ids=[n for n, _ in CLEAN_DEFAULT])
 def test_clean_lab_file_gives_none(family_record, name, seed):
     case = clean_case(name, seed, **DEFAULT)
-    _check_none(bm.diagnose(family_record(case), case.form, progress=False))
+    _check_none(bm.diagnose(family_record(case), case.form, progress=False).to_dict())
 
 
 @pytest.mark.slow
@@ -78,18 +78,18 @@ def test_clean_spencer_lab_file_gives_none(family_record):
     slow because diagnosing spencer (14 parameters, a stiff law) takes about 15 min of a shared core."""
     case = clean_case("spencer-device", 922, **DEFAULT)
     assert case.command and case.command_interp == "linear"
-    _check_none(bm.diagnose(family_record(case), case.form, progress=False))
+    _check_none(bm.diagnose(family_record(case), case.form, progress=False).to_dict())
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effect, seed", [(e, 950 + i) for i, e in enumerate(HIDDEN)], ids=list(HIDDEN))
 def test_hidden_effect_in_a_long_lab_file_is_named(family_record, effect, seed):
     case = hidden_case(effect, seed, **SLOW)
-    _check_named(bm.diagnose(family_record(case), "dahl", progress=False), effect)
+    _check_named(bm.diagnose(family_record(case), "dahl", progress=False).to_dict(), effect)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name, seed", [(n, 970 + i) for i, n in enumerate(LONG_CLEAN)], ids=LONG_CLEAN)
 def test_clean_long_lab_file_gives_none(family_record, name, seed):
     case = clean_case(name, seed, **SLOW)
-    _check_none(bm.diagnose(family_record(case), case.form, progress=False))
+    _check_none(bm.diagnose(family_record(case), case.form, progress=False).to_dict())
