@@ -12,6 +12,7 @@ works from every sub-folder.
 from __future__ import annotations
 
 import numpy as np
+import reference_families
 import xarray as xr
 
 from bayes_mr.data.schema import make_record
@@ -254,15 +255,7 @@ DEVICE_MAGNITUDES = {
 
 def switching_voltage(n: int, fs: float, seed: int, high: float = 2.0, mean_hold: float = 0.5) -> np.ndarray:
     """On/off command voltage [V] with exponentially distributed hold times [s] (like the NEES tests)."""
-    rng = np.random.default_rng(seed + 500)
-    v = np.zeros(n)
-    i, level = 0, 0.0
-    while i < n:
-        hold = max(1, int(rng.exponential(mean_hold) * fs))
-        v[i:i + hold] = level
-        i += hold
-        level = high - level
-    return v
+    return reference_families.switching_voltage(n, fs, np.random.default_rng(seed + 500), high, mean_hold)
 
 
 def simulated_record(kind="structure", form="dahl", effects=None, *, duration=6.0, fs=500.0, seed=0,
