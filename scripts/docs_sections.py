@@ -287,8 +287,9 @@ def results_document(data: Path, figures: Path) -> str:
 def performance_document(data: Path) -> str:
     """docs/performance.md from ``data/bench.json`` (a page that says how to make it when there is none)."""
     lines = [GENERATED, "", "# Performance", "",
-             "Measured by `bayes-mr bench` in one run on a quiet machine; `make bench` runs it and "
-             "`scripts/update_readme.py bench` writes this page from its JSON ([`data/bench.json`](data/bench.json)). "
+             "Measured by `bayes-mr bench` in one run; `make bench` runs it (meant for a quiet machine: other "
+             "work on the cores slows every figure) and `scripts/update_readme.py bench` writes this page from its "
+             "JSON ([`data/bench.json`](data/bench.json)). "
              "Absolute times move between machines and between hours on one; the ratios measured within one run "
              "(our UKF against filterpy's, the specialised kernel against the generic one) hold much better. "
              "What each figure times is in `bayes_mr/bench/benchmark.py` and the `bench` keys of "
