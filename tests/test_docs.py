@@ -254,3 +254,12 @@ def test_the_generator_needs_no_results_folder(tmp_path):
     assert update_readme.main(["all", "--docs", str(docs)]) == 0
     for name in ("results.md", "performance.md"):
         assert (docs / name).read_text() == (DOCS / name).read_text()
+
+
+def test_every_module_path_the_documents_name_exists():
+    """A path like ``bayes_mr/models/kernel.py`` in the README or docs/ points at a file of the tree."""
+    named = set()
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        named |= set(re.findall(r"\bbayes_mr/[\w/]+\.py\b", doc.read_text()))
+    missing = sorted(p for p in named if not (ROOT / p).is_file())
+    assert not missing, f"paths named in the documents that do not exist: {missing}"
