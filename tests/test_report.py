@@ -214,3 +214,5 @@ def test_the_report_states_each_posterior_s_work_and_a_cap_that_acted():
     assert ("- lugre: 900 log-density evaluations × 18900 integrator steps = 1.7e+07, 12 s; stopped by the wall-time "
             "cap of 3 s: a machine limit, not a result.") in lines
     assert work_lines({"budget": {}}) == []  # a run without posteriors (or written before the pool was counted)
+    quick = work_lines({"posterior_work": {"lugre": work["lugre"]}, "budget": {"mcmc_pool": None}})
+    assert quick[1] == "Posteriors' work (no pool, 1.7e+07 integrator steps spent; no wall-time cap, 12 s used):"

@@ -222,12 +222,12 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
         try:
             lik, res = fitted.get(form) or least_squares(form, LeastSquares(settings=Emcee.lsq_settings(seed)),
                                                          part_a, budget.noise)
+            price = evaluation_price(lik, res)
         except FIT_ERRORS as exc:
             fits[form] = (error_row(form, "mcmc", exc, _time.perf_counter() - t0), None)
             work[form] = _work_entry(None, 0, left, _time.perf_counter() - t0, None, None)
             say(row_message(form, "mcmc", fits[form][0]))
             continue
-        price = evaluation_price(lik, res)
         if left is not None and left < price:
             skipped[form] = pool_spent(pool, work)
             work[form] = _work_entry(price, 0, left, _time.perf_counter() - t0, None, None)

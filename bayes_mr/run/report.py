@@ -211,8 +211,9 @@ def work_lines(summary: dict) -> list[str]:
     budget = summary.get("budget") or {}
     pool, cap = budget.get("mcmc_pool"), budget.get("mcmc_pool_cap_s")
     spent = sum(w["integrator_steps"] for w in work.values())
-    head = (f"Posteriors' work ({f'a pool of {pool:.3g}' if pool else 'no pool'} integrator steps, "
-            f"{float(spent):.3g} spent; {f'wall-time cap {cap:.0f} s' if cap else 'no wall-time cap'}, "
+    charged = (f"a pool of {pool:.3g} integrator steps, {float(spent):.3g} spent" if pool else
+               f"no pool, {float(spent):.3g} integrator steps spent")
+    head = (f"Posteriors' work ({charged}; {f'wall-time cap {cap:.0f} s' if cap else 'no wall-time cap'}, "
             f"{sum(w['wall_s'] for w in work.values()):.0f} s used):")
     lines = ["", head, ""]
     for form, w in work.items():
