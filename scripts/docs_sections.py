@@ -261,8 +261,9 @@ def results_document(data: Path, figures: Path) -> str:
               "`make run` (`bayes-mr run --out results`) takes the packaged MR-damper record through the thesis's "
               "procedure and beyond: it trims and decimates the record and splits it into part A, which the fits "
               "see, and part B, which none sees; fits every form by least squares and by the UKF and selects by "
-              "the calibrated evidence; gives the emcee posteriors one shared pool of wall time, the selected "
-              "form's first; refits the choice under the other residual model; diagnoses the selected model on "
+              "the calibrated evidence; gives the emcee posteriors one shared pool of work (log-density evaluations "
+              "priced in integrator steps, so the same posteriors on any machine; the wall clock only caps it), "
+              "the selected form's first; refits the choice under the other residual model; diagnoses the selected model on "
               "part A (the MR-damper effects ranked and the passing ones added, then a search of the term library "
               "beyond them) and predicts part B with every model; and identifies the damper from a virtual shake "
               "table's displacement and acceleration alone.", ""]

@@ -138,17 +138,33 @@ def test_the_headline_says_which_posterior_did_not_converge_and_why():
                     "normalized-bouc-wen: 6 free parameters.")
     assert _posterior_lines(rows[:1], "dahl", {}) == [
         "emcee posteriors for dahl (3250 steps; R-hat_max 1.0080): converged (≥ 50 τ, R-hat < 1.01)."]
+    # the work each posterior stands on, where the rows carry it
+    assert _posterior_lines([dict(rows[0], evaluations=32000)], "dahl", {}) == [
+        "emcee posteriors for dahl (3250 steps; 32000 log-density evaluations with their pilots; R-hat_max 1.0080): "
+        "converged (≥ 50 τ, R-hat < 1.01)."]
     projected = {"engine": "mcmc", "model": "spencer", "n_steps": 300, "tau_max": 25.0, "rhat_max": 1.7,
                  "converged": False, "stopped": "projected",
-                 "projection": {"tau_max": 25.0, "steps_needed": 1375, "seconds_needed": 412.4, "budget_s": 90.0}}
+                 "projection": {"tau_max": 25.0, "steps_needed": 1375, "steps_allowed": 400,
+                                "evaluations_needed": 11000, "evaluations_allowed": 3200}}
     chains, = _posterior_lines([projected], "spencer", {})
     assert ("spencer (stopped when its integrated time (25 steps, a lower bound from a chain this short) projected "
-            "the rule to at least ~1375 steps, ~412 s "
-            "against the 90 s left: 300 steps = 12 τ, R-hat 1.7000) NOT converged") in chains
+            "the rule to at least ~1375 steps (11000 log-density evaluations) against the 400 (3200) its work "
+            "budget left: 300 steps = 12 τ, R-hat 1.7000) NOT converged") in chains
     # a chain just over the rule reads as over it (1.0109 is not "1.01"), and a long one in whole τ
-    timed_out = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_seconds", projection=None)
+    spent = dict(projected, n_steps=1326, tau_max=12.0, rhat_max=1.0109, stopped="max_evaluations", projection=None,
+                 evaluations=56000)
+    chains, = _posterior_lines([spent], "spencer", {})
+    assert ("spencer (its work budget ran out (56000 log-density evaluations): 1326 steps = 110 τ, R-hat 1.0109) "
+            "NOT converged") in chains
+    # the wall-time cap is a machine limit, not a result of the work budget: the main job's own sentence for it,
+    # else the cap the row ran under
+    timed_out = dict(spent, stopped="max_seconds", wall_cap_s=312.4)
     chains, = _posterior_lines([timed_out], "spencer", {})
-    assert "spencer (time limit: 1326 steps = 110 τ, R-hat 1.0109) NOT converged" in chains
+    assert "spencer (stopped by the wall-time cap of 312 s: a machine limit, not a result: 1326 steps" in chains
+    work = {"spencer": {"machine_limit": "stopped by the wall-time cap of 312 s (what the posteriors' 1800 s cap left "
+                                         "it): a machine limit, not a result"}}
+    chains, = _posterior_lines([timed_out], "spencer", {}, work)
+    assert "spencer (stopped by the wall-time cap of 312 s (what the posteriors' 1800 s cap left it)" in chains
     # a chain of independent walkers that met the rule on a proposal with heavy-tailed weights
     tails = dict(timed_out, n_steps=800, tau_max=9.0, rhat_max=1.008, stopped="q_tails", pareto_k=1.3)
     chains, = _posterior_lines([tails], "spencer", {})
@@ -176,3 +192,27 @@ def test_an_unconverged_headline_names_the_shape_that_makes_the_chain_slow():
     assert "R-hat 1.1600) NOT converged" in _posterior_lines([plain], "x", {})[0]
     converged = dict(row, converged=True, stopped="converged")
     assert "spread" not in _posterior_lines([converged], "x", {})[0]
+
+
+def test_the_report_states_each_posterior_s_work_and_a_cap_that_acted():
+    """report.md's account of the pool: per form the evaluations, their price and what the pool was charged, with the
+    wall time beside it; a form the wall-time cap stopped carries its machine-limit sentence."""
+    from bayes_mr.run.report import work_lines
+
+    work = {"spencer": {"evaluations": 38400, "steps_per_evaluation": 66100, "integrator_steps": 38400 * 66100,
+                        "pool_left": 5e9, "wall_s": 610.2, "wall_cap_s": 1800.0, "machine_limit": None},
+            "dahl": {"evaluations": 0, "steps_per_evaluation": None, "integrator_steps": 0, "pool_left": 2.4e9,
+                     "wall_s": 0.0, "wall_cap_s": 0.0, "machine_limit": "not run: the cap … a machine limit"},
+            "lugre": {"evaluations": 900, "steps_per_evaluation": 18900, "integrator_steps": 900 * 18900,
+                      "pool_left": 2.4e9, "wall_s": 12.0, "wall_cap_s": 3.0,
+                      "machine_limit": "stopped by the wall-time cap of 3 s: a machine limit, not a result"}}
+    lines = work_lines({"posterior_work": work, "budget": {"mcmc_pool": 5e9, "mcmc_pool_cap_s": 1800.0}})
+    assert lines[1] == ("Posteriors' work (a pool of 5e+09 integrator steps, 2.56e+09 spent; wall-time cap 1800 s, "
+                        "622 s used):")
+    assert "- spencer: 38400 log-density evaluations × 66100 integrator steps = 2.54e+09, 610 s." in lines
+    assert "- dahl: no evaluation, 0 s; not run: the cap … a machine limit." in lines
+    assert ("- lugre: 900 log-density evaluations × 18900 integrator steps = 1.7e+07, 12 s; stopped by the wall-time "
+            "cap of 3 s: a machine limit, not a result.") in lines
+    assert work_lines({"budget": {}}) == []  # a run without posteriors (or written before the pool was counted)
+    quick = work_lines({"posterior_work": {"lugre": work["lugre"]}, "budget": {"mcmc_pool": None}})
+    assert quick[1] == "Posteriors' work (no pool, 1.7e+07 integrator steps spent; no wall-time cap, 12 s used):"

@@ -242,7 +242,8 @@ def training_100(seed: int = 0) -> dict:
 def _lsq_then_mcmc(lik: OutputError, seed: int, max_seconds: float | None = None):
     """Least squares, then an emcee posterior started from it: (lsq result, its wall time [s], chain, its wall time [s]).
 
-    ``max_seconds``: the chain's wall-time budget (``MCMCSettings.max_seconds``)."""
+    ``max_seconds``: the chain's wall-time cap (``MCMCSettings.max_seconds``): what the benchmark times is how long
+    the chain takes, so a cap, not a work budget, bounds it."""
     from bayes_mr.inference.lsq.least_squares import fit_lsq
     from bayes_mr.inference.mcmc.settings import MCMCSettings
     from bayes_mr.inference.mcmc.sampler import fit_mcmc

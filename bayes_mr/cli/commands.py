@@ -252,12 +252,14 @@ def cmd_run(args) -> int:
     record = _read(args.record, args) if args.record else None
     other = _read(args.validate, args) if args.validate else None
     budget = None
-    if args.mcmc_pool is not None:
+    if args.mcmc_pool is not None or args.mcmc_cap is not None:
         from dataclasses import replace
 
         from bayes_mr.run.plan import FULL, QUICK
 
-        budget = replace(QUICK if args.quick else FULL, mcmc_pool_s=args.mcmc_pool)
+        budget = QUICK if args.quick else FULL
+        budget = replace(budget, mcmc_pool=budget.mcmc_pool if args.mcmc_pool is None else args.mcmc_pool,
+                         mcmc_pool_cap_s=budget.mcmc_pool_cap_s if args.mcmc_cap is None else args.mcmc_cap)
     summary = run(args.out, quick=args.quick, seed=args.seed, progress=not args.quiet, noise=args.noise,
                   record=record, validate=other, budget=budget)
     print(f"report: {Path(args.out) / 'report.md'}", file=sys.stderr)

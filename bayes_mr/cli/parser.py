@@ -188,9 +188,17 @@ def _job_parsers(sub) -> None:
     p.add_argument("--noise", choices=("iid", "ar"), default=None,
                    help="residual model of the comparison (default iid); the other one is refitted by least "
                         "squares beside it and the report says how the model choice and ln BF move")
-    p.add_argument("--mcmc-pool", type=float, default=None, metavar="SECONDS",
-                   help="wall seconds the emcee posteriors share, the selected form's first (default 600; "
-                        "--quick: none, each posterior runs to its step limit)")
+    p.add_argument("--mcmc-pool", type=float, default=None, metavar="STEPS",
+                   help="work the emcee posteriors share, the selected form's first, in integrator steps: each "
+                        "log-density evaluation (one walker, one step) is charged the RK4 and Rosenbrock steps of "
+                        "one simulation of part A at its least-squares optimum, so the same posteriors run on any "
+                        "machine (default: Budget.mcmc_pool of bayes_mr/run/plan.py, what the five forms' posteriors "
+                        "need on the packaged record and a quarter more; --quick: none, each posterior runs to its "
+                        "step limit)")
+    p.add_argument("--mcmc-cap", type=float, default=None, metavar="SECONDS",
+                   help="wall-time cap of all the posteriors together: a safety net for a slow machine, reported "
+                        "as a machine limit where it stops or skips a posterior (default: Budget.mcmc_pool_cap_s, 1800; "
+                        "--quick: none)")
     _no_readme_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 

@@ -85,9 +85,10 @@ class Emcee:
     Attributes
     ----------
     settings : MCMCSettings, optional
-        Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``). With a wall-time
-        budget (``max_seconds``) a posterior projected not to meet the rule in it is not started:
-        :class:`~bayes_mr.inference.mcmc.wall_time.OverBudget` says why (:func:`~bayes_mr.inference.mcmc.wall_time.check_budget`).
+        Sampler settings (default: ``MCMCSettings(seed=seed, progress=progress)``). With a work budget
+        (``max_evaluations``, in log-density evaluations) a posterior that cannot hold its pilot and the shortest
+        chain the rule has held in is not started: :class:`~bayes_mr.inference.mcmc.budget.OverBudget` says why
+        (:func:`~bayes_mr.inference.mcmc.budget.check_budget`).
     evidence : {"ti", "laplace", "tmcmc"}
         ``"ti"``: thermodynamic integration over a temperature ladder, with
         stepping-stone and Laplace beside it; ``"laplace"``: no ladder, the
@@ -122,19 +123,13 @@ class Emcee:
         """The chain and its evidence routes from a least-squares fit ``res`` of ``likelihood`` already made
         (``compare`` reuses its ``lsq`` row's: :func:`bayes_mr.selection.fit_jobs.lsq_mcmc_job`)."""
         from bayes_mr.inference.evidence.routes import evidence_routes, laplace_evidence, tmcmc_evidence
-        from bayes_mr.inference.mcmc.wall_time import check_budget
         from bayes_mr.inference.mcmc.settings import MCMCSettings
         from bayes_mr.inference.mcmc.sampler import fit_mcmc
-        from bayes_mr.inference.mcmc.start import start_from_lsq
         from bayes_mr.inference.mcmc_posterior import mcmc_posterior
         from bayes_mr.inference.evidence.tmcmc import TMCMCSettings, run_tmcmc
 
         settings = self.settings or MCMCSettings(seed=seed, progress=progress)
-        if settings.max_seconds is not None:  # a chain that cannot converge in its budget is not started
-            d = likelihood.ndim
-            check_budget(likelihood, start_from_lsq(likelihood, res)[0], settings.walkers(d), settings.pilot_length,
-                         settings.max_seconds, settings.walkers_after_pilot(d) if settings.pilot_length else None)
-        chain = fit_mcmc(likelihood, lsq=res, settings=settings)
+        chain = fit_mcmc(likelihood, lsq=res, settings=settings)  # OverBudget before any work, if it cannot fit
         if self.evidence == "ti":
             with job_executor(self.executor) as ex:  # the ladder's rungs: on the cluster the fit runs on, if any
                 routes = evidence_routes(likelihood, lsq=res, posterior=chain, seed=seed, executor=ex)

@@ -72,6 +72,9 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
         "pilot_steps": result.pilot_steps, "adapt_acceptance": [float(a) for a in result.adapt_acceptance],
         "converged": bool(result.converged), "stopped": result.stopped, "seed_entropy": result.seed_entropy,
         "projection": result.projection,
+        # the work the posterior stands on and the limits it ran under (a cap that acted is a machine limit)
+        "evaluations": int(result.evaluations), "max_evaluations": result.max_evaluations,
+        "wall_cap_s": result.max_seconds,
         "pareto_k": float(result.pareto_k) if np.isfinite(result.pareto_k) else None,
         "geometry": chain_geometry(result.chain[result.burn:], lik.lower, lik.upper, result.names, result.tau),
     }

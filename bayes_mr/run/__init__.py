@@ -4,7 +4,7 @@
   (:data:`~.plan.FULL` for ``make run``, :data:`~.plan.QUICK` for ``--quick``);
 * :mod:`.records` — the measured record prepared and split into part A (training) and part B (held out);
 * :mod:`.job` — :func:`~.job.run`: first pass, posteriors, stages, report;
-* :mod:`.posteriors` — the emcee posteriors from one pool of seconds;
+* :mod:`.posteriors` — the emcee posteriors from one pool of work (integrator steps) under a wall-time cap;
 * :mod:`.stages` — the stages that need only the first pass (diagnosis, virtual shake table);
 * :mod:`.aside` — those stages in a child process beside the posteriors, where cores allow;
 * :mod:`.context` — a paper's parameters and the other residual model, for the headline;

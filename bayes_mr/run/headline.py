@@ -153,24 +153,33 @@ def _multiple(value: float) -> str:
 
 
 #: Why an emcee chain stopped unconverged (its ``stopped``), in words: the headline and the bench table.
-STOP_REASONS = {"max_steps": "step limit", "max_seconds": "time limit", "projected": "projection",
-                "q_tails": "proposal's tails"}
+STOP_REASONS = {"max_steps": "step limit", "max_evaluations": "work budget", "max_seconds": "wall-time cap",
+                "projected": "projection", "q_tails": "proposal's tails"}
 
 
-def _stop_reason(row: dict) -> str:
-    """Why a chain stopped unconverged; a projected stop gives the steps and seconds the rule would need at
+def _stop_reason(row: dict, machine_limit: str | None = None) -> str:
+    """Why a chain stopped unconverged; a projected stop gives the steps and evaluations the rule would need at
     least: τ estimated from a chain shorter than 50 τ is biased low (emcee's own caution), and on the packaged
     damper it kept growing with the chain (convergence.projection), so the projection is a floor, not a
-    near miss."""
+    near miss. A chain the wall-time cap stopped says so as a machine limit (``machine_limit``: the main job's
+    sentence for it, :func:`bayes_mr.run.posteriors.cap_message`), never as a result of its work budget."""
     p = row.get("projection")
-    if row.get("stopped") == "projected" and p:
+    stopped = row.get("stopped")
+    if stopped == "projected" and p:
         return (f"stopped when its integrated time ({fmt(p['tau_max'], 2)} steps, a lower bound from a chain this "
-                f"short) projected the rule to at least ~{p['steps_needed']} steps, ~{p['seconds_needed']:.0f} s "
-                f"against the {p['budget_s']:.0f} s left")
-    if row.get("stopped") == "q_tails" and row.get("pareto_k") is not None:
+                f"short) projected the rule to at least ~{p['steps_needed']} steps "
+                f"({p['evaluations_needed']} log-density evaluations) against the {p['steps_allowed']} "
+                f"({p['evaluations_allowed']}) its work budget left")
+    if stopped == "max_evaluations":
+        return f"its work budget ran out ({row.get('evaluations')} log-density evaluations)"
+    if stopped == "max_seconds":
+        cap = row.get("wall_cap_s")
+        return machine_limit or (f"stopped by the wall-time cap of {cap:.0f} s: a machine limit, not a result"
+                                 if cap is not None else "stopped by the wall-time cap: a machine limit, not a result")
+    if stopped == "q_tails" and row.get("pareto_k") is not None:
         return (f"met the rule, but its proposals' importance weights have a Pareto k̂ of {fmt(row['pareto_k'], 2)}: "
                 f"the fitted proposal underweights part of the posterior, so τ and R-hat do not bound its error")
-    return STOP_REASONS.get(row.get("stopped"), "budget")
+    return STOP_REASONS.get(stopped, "budget")
 
 
 def chain_shape(geometry: dict | None) -> str:
@@ -190,21 +199,28 @@ def chain_shape(geometry: dict | None) -> str:
     return "; " + "; ".join(parts) if parts else ""
 
 
-def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str]) -> list[str]:
+def _posterior_lines(rows: list[dict], selected: str | None, skipped: dict[str, str],
+                     work: dict[str, dict] | None = None) -> list[str]:
     """The headline's emcee sentence: which posteriors converged, which did not and why (the chain's length in
     integrated autocorrelation times and its R-hat against the ≥ 50 τ and R-hat < 1.01 asked, and the shape that
-    makes it slow: :func:`chain_shape`), and which forms got none (the selected one named first)."""
+    makes it slow: :func:`chain_shape`; a wall-time cap that acted, as a machine limit), and which forms got none
+    (the selected one named first). ``work``: ``summary.json``'s ``posterior_work``."""
     chains = [r for r in rows if r["engine"] == "mcmc" and "error" not in r]
+    work = work or {}
     lines = []
     if chains:
-        unconverged = [f"{r['model']} ({_stop_reason(r)}: {r.get('n_steps')} steps = "
+        unconverged = [f"{r['model']} ({_stop_reason(r, work.get(r['model'], {}).get('machine_limit'))}: "
+                       f"{r.get('n_steps')} steps = "
                        f"{_multiple((r.get('n_steps') or 0) / r['tau_max']) if r.get('tau_max') else '?'} τ, "
                        f"R-hat {_rhat(r.get('rhat_max'))}{chain_shape(r.get('geometry'))})"
                        for r in chains if not r.get("converged")]
+        evaluations = [r.get("evaluations") for r in chains]  # the work each stands on (absent from older runs)
+        spent = ("" if None in evaluations else
+                 f"{', '.join(str(n) for n in evaluations)} log-density evaluations with their pilots; ")
         lines.append(f"emcee posteriors for {', '.join(r['model'] for r in chains)} "
-                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; R-hat_max "
+                     f"({', '.join(str(r.get('n_steps')) for r in chains)} steps; {spent}R-hat_max "
                      f"{', '.join(_rhat(r.get('rhat_max')) for r in chains)}): "
-                     + (f"{', '.join(unconverged)} NOT converged in this budget (≥ 50 τ and R-hat < 1.01 asked)."
+                     + (f"{', '.join(unconverged)} NOT converged (≥ 50 τ and R-hat < 1.01 asked)."
                         if unconverged else "converged (≥ 50 τ, R-hat < 1.01)."))
     if skipped:
         order = sorted(skipped, key=lambda m: m != selected)
@@ -225,7 +241,7 @@ def headline(summary: dict) -> list[str]:
                  + _floor_sentence(rec))
     lines += _selection_lines(summary)
     lines += _noise_lines(summary)
-    lines += _posterior_lines(rows, sel, summary.get("mcmc_skipped") or {})
+    lines += _posterior_lines(rows, sel, summary.get("mcmc_skipped") or {}, summary.get("posterior_work"))
     best = summary["best_on_part_b"]
     sp = summary["spencer_1997"].get("part_b", {})
     if best:

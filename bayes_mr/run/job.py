@@ -10,7 +10,7 @@ command voltage, measured force):
    by any fit).
 2. **Compare.** Every form with least squares (Laplace evidence) and the
    thesis's UKF (LHS × τ priors), then the emcee posteriors (TI or Laplace
-   evidence) from one pool of seconds, the selected form's first
+   evidence) from one pool of work under a wall-time cap, the selected form's first
    (:mod:`bayes_mr.run.posteriors`); selection by evidence, MSE and force
    NRMSE beside it; thesis method 1 (scores on A) and method 2 (predicting B).
 3. **A paper's table.** Spencer et al. (1997)'s published parameters (from a
@@ -90,13 +90,16 @@ def first_pass(part_a, part_b, budget: Budget, *, seed: int, say) -> dict:
 
 
 def with_posteriors(first: dict, part_a, part_b, budget: Budget, *, seed: int, out_dir: Path, say) -> dict:
-    """The comparison: the first pass (:func:`first_pass`) and the emcee posteriors from one pool of seconds, the
+    """The comparison: the first pass (:func:`first_pass`) and the emcee posteriors from one pool of work, the
     selected form's first, each chain from its form's least-squares fit of the first pass
     (:mod:`bayes_mr.run.posteriors`); every fit saved under ``out_dir/fits``; the selection on all rows."""
     order = posterior_order(budget.forms, first["selected"], first["bayes_factors"])
-    if budget.mcmc_pool_s is not None:
-        say(f"emcee posteriors from a pool of {budget.mcmc_pool_s:g} s, in this order: {', '.join(order)}")
-    chains, skipped = run_posteriors(part_a, part_b, order, budget, seed=seed, fitted=first["fitted"], say=say)
+    if budget.mcmc_pool is not None:
+        cap = "" if budget.mcmc_pool_cap_s is None else f" (wall-time cap {budget.mcmc_pool_cap_s:g} s)"
+        say(f"emcee posteriors from a pool of {budget.mcmc_pool:.3g} integrator steps{cap}, in this order: "
+            f"{', '.join(order)}")
+    chains, skipped, work = run_posteriors(part_a, part_b, order, budget, seed=seed, fitted=first["fitted"],
+                                           say=say)
     fits = dict(first["idata"])
     fits.update({(m, "mcmc"): idata for m, (_, idata) in chains.items() if idata is not None})
     by_pair = {(r["model"], r["engine"]): r for r in first["rows"]}
@@ -107,7 +110,7 @@ def with_posteriors(first: dict, part_a, part_b, budget: Budget, *, seed: int, o
     # selection across forms as compare selects: the route every form has, on the calibrated evidence
     ok = [r for r in rows if "error" not in r]
     return {"rows": rows, **choose(ok, [f for f in budget.forms if any(r["model"] == f for r in ok)]),
-            "mcmc_skipped": skipped, "posterior_order": order, "idata": fits}
+            "mcmc_skipped": skipped, "posterior_order": order, "posterior_work": work, "idata": fits}
 
 
 #: Keys of :func:`bayes_mr.selection.comparison.choose` that ``summary.json`` carries besides ``selected`` and ``bayes_factors``.
@@ -219,7 +222,7 @@ def _comparison_summary(comp: dict, budget: Budget, info: dict, sensitivity: dic
         "record": info,
         "rows": comp["rows"], "selected": comp["selected"], "bayes_factors": comp["bayes_factors"],
         "evidence_route": comp["evidence_route"], "mcmc_skipped": comp["mcmc_skipped"],
-        "posterior_order": comp["posterior_order"],
+        "posterior_order": comp["posterior_order"], "posterior_work": comp["posterior_work"],
         **{k: comp[k] for k in SELECTION_KEYS if k in comp},
         "noise": budget.noise, "noise_sensitivity": sensitivity,
         "best_on_part_b": None if best is None else {"model": best["model"], "engine": best["engine"],

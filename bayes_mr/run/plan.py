@@ -27,13 +27,20 @@ class Budget:
         Models compared.
     mcmc : MCMCSettings
         Settings of each posterior (a run that hits ``max_steps`` is flagged
-        not converged, not hidden). With ``max_seconds`` a posterior whose
-        measured step cost projects past it is not started, and the report
-        says which and why (:mod:`bayes_mr.inference.mcmc.wall_time`).
-    mcmc_pool_s : float or None
-        Wall seconds all posteriors share (None: each has ``mcmc.max_seconds`` alone). They run after every
-        form's least squares and UKF, the selected form first, then by evidence, each with what the earlier
-        ones left (:mod:`bayes_mr.run.posteriors`).
+        not converged, not hidden). With ``max_evaluations`` a posterior that
+        cannot hold its pilot and shortest chain in it is not started, and the
+        report says which and why (:mod:`bayes_mr.inference.mcmc.budget`).
+    mcmc_pool : float or None
+        The work all posteriors share [integrator steps]: each log-density evaluation is charged the integrator
+        steps (RK4 sub-steps and Rosenbrock steps) of one simulation of part A at the least-squares optimum its
+        chain starts from, a price fixed by the record and that fit, never by the machine
+        (:func:`bayes_mr.run.posteriors.evaluation_price`). None: each posterior has ``mcmc.max_evaluations``
+        alone. They run after every form's least squares and UKF, the selected form first, then by evidence,
+        each with what the earlier ones left (:mod:`bayes_mr.run.posteriors`).
+    mcmc_pool_cap_s : float or None
+        Wall-time cap of all posteriors together [s]: a safety net for a machine far slower than the pool was
+        set for, deciding nothing on a machine that meets it. A posterior it stops, or does not start, is
+        reported as a machine limit, not a result. None: no cap.
     evidence : str
         ``"ti"`` or ``"laplace"`` for the MCMC rows.
     ukf_lhs : int
@@ -73,7 +80,8 @@ class Budget:
     train_fraction: float = 0.6
     forms: tuple[str, ...] = tuple(FORMS)
     mcmc: MCMCSettings = field(default_factory=lambda: MCMCSettings(max_steps=3000))
-    mcmc_pool_s: float | None = None
+    mcmc_pool: float | None = None
+    mcmc_pool_cap_s: float | None = None
     evidence: str = "ti"
     ukf_lhs: int = 3
     ukf_taus: tuple[float, ...] = TAUS
@@ -89,19 +97,31 @@ class Budget:
         unknown = set(self.shake_table_engines) - {"ukf", "lsq"}
         if unknown:
             raise ValueError(f"shake_table_engines: {sorted(unknown)} unknown; use 'ukf' and/or 'lsq'")
-        if self.mcmc_pool_s is not None and not self.mcmc_pool_s > 0:
-            raise ValueError(f"mcmc_pool_s must be positive seconds or None, not {self.mcmc_pool_s!r}")
+        if self.mcmc_pool is not None and not self.mcmc_pool > 0:
+            raise ValueError(f"mcmc_pool must be a positive number of integrator steps or None, not "
+                             f"{self.mcmc_pool!r}")
+        if self.mcmc_pool_cap_s is not None and not self.mcmc_pool_cap_s > 0:
+            raise ValueError(f"mcmc_pool_cap_s must be positive seconds or None, not {self.mcmc_pool_cap_s!r}")
 
 
 #: ``make run``: the whole trimmed record at ~1 kHz (the record's 3 kHz decimated by 3; the RK4 sub-steps are
 #: set by the model's stiffness, not the rate, so 1 kHz costs about what 250 Hz does). The emcee posteriors
-#: share one pool of seconds (``mcmc_pool_s``), the selected form's first (:mod:`bayes_mr.run.posteriors`);
-#: a posterior projected past what the pool has left is not started, and the report says which and why
-#: (:mod:`bayes_mr.inference.mcmc.wall_time`). Selection is by the Laplace evidence every form has (a
-#: thermodynamic-integration ladder per form takes minutes each: ``bayes-mr compare --engines mcmc`` runs it).
-#: The virtual shake table runs the UKF only; the diagnosis runs on all of part A at 1 kHz.
-FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool_s=720.0,
-              evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
+#: share one pool of work (``mcmc_pool``, integrator steps), the selected form's first
+#: (:mod:`bayes_mr.run.posteriors`); a posterior that cannot hold its pilot and shortest chain in what the pool
+#: has left is not started, and the report says which and why (:mod:`bayes_mr.inference.mcmc.budget`).
+#: The pool is what the five forms' posteriors spend unbudgeted on that record, each to its own rule, and a
+#: quarter more: normalized-bouc-wen 10 400 log-density evaluations × 60 700 integrator steps, dahl
+#: 8 000 × 19 400, lugre 10 400 × 18 900, bouc-wen 25 200 × 28 400 (seven adaptation rounds), spencer
+#: 38 400 × 66 100, 4.24e9 in all (``scripts/measure_posterior_work.py``, seed 0; the same counts on any machine).
+#: The quarter (1.06e9) covers every posterior taking one adaptation round and two convergence checks more than
+#: there (0.85e9), so another seed's chains also get all five. The wall-time cap (1800 s) is a safety net only:
+#: that script reports the posteriors' wall times beside their work (1110 s in all on two cores shared with
+#: another job's test run).
+#: Selection is by the Laplace evidence every form has (a thermodynamic-integration ladder per form takes
+#: minutes each: ``bayes-mr compare --engines mcmc`` runs it). The virtual shake table runs the UKF only; the
+#: diagnosis runs on all of part A at 1 kHz.
+FULL = Budget(fs=1000.0, duration_s=None, mcmc=MCMCSettings(max_steps=8000), mcmc_pool=5.3e9,
+              mcmc_pool_cap_s=1800.0, evidence="laplace", ukf_lhs=2, shake_table_engines=("ukf",))
 #: ``bayes-mr run --quick``: a minute-long pass (a 4-s window at ~250 Hz, two forms, short chains; the
 #: diagnosis on that window's part A at 1 kHz, ~15 s).
 QUICK = Budget(fs=250.0, duration_s=4.0, forms=("dahl", "lugre"),

@@ -1,19 +1,30 @@
-"""The main job's emcee posteriors: one pool of seconds, the selected form's posterior first.
+"""The main job's emcee posteriors: one pool of work, the selected form's posterior first.
 
 A posterior costs minutes where a least-squares fit costs seconds, and the
-forms' costs differ by tens (on the packaged damper at 1 kHz one ensemble
-step of spencer's 56 walkers takes ~0.35 s, of dahl's ~0.01 s). A budget per
+forms' costs differ several-fold (on the packaged damper at 1 kHz one
+simulation of part A takes ~66 000 integrator steps for spencer, ~19 000 for
+dahl, and spencer's ensemble has 56 walkers to dahl's 20;
+``scripts/measure_posterior_work.py``). A budget per
 posterior either starves the expensive selected form or spends the whole job
 on forms the evidence has already ranked far below it. So the main job fits
 every form by least squares and the UKF first — the Laplace evidence of the
 least-squares fits selects — and then runs the posteriors in the order the
 evidence ranks the forms, the selected one first, each with what the earlier
-ones left of :attr:`bayes_mr.run.plan.Budget.mcmc_pool_s` as its wall-time
-budget. A posterior whose measured step cost projects past what is left is
-not started, and one whose own integrated time projects the rule (≥ 50 τ,
-R-hat < 1.01) past it stops there (:mod:`bayes_mr.inference.mcmc.wall_time`,
+ones left of :attr:`bayes_mr.run.plan.Budget.mcmc_pool`.
+
+The pool is counted in work, never in seconds, so the same record and seed give
+the same posteriors on a quiet machine and a busy one: each log-density
+evaluation (one walker, one step) is charged its form's price
+(:func:`evaluation_price`, the integrator steps of one simulation at the
+least-squares optimum), so a spencer evaluation weighs what it costs against a
+dahl one, on any machine and thread count. A posterior that cannot hold its
+pilot and shortest chain in what is left is not started, and one whose own
+integrated time projects the rule (≥ 50 τ, R-hat < 1.01) past it stops there
+(:mod:`bayes_mr.inference.mcmc.budget`,
 :func:`bayes_mr.inference.mcmc.convergence.projection`); the report names both,
-with the numbers.
+with the numbers. The wall clock is only a safety cap
+(:attr:`~bayes_mr.run.plan.Budget.mcmc_pool_cap_s`): a posterior it stops or
+does not start is reported as a machine limit, not a result.
 """
 
 from __future__ import annotations
@@ -23,12 +34,15 @@ import time as _time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from bayes_mr.execution.executor import Outcome, local_threads, run_jobs
 from bayes_mr.selection.fit_jobs import (
     FIT_ERRORS, error_row, free_parameters, least_squares, lsq_mcmc_job, row_message, unit_results,
 )
 from bayes_mr.inference.identify import Emcee, LeastSquares
-from bayes_mr.inference.mcmc.wall_time import over_budget
+from bayes_mr.inference.mcmc.budget import over_budget
+from bayes_mr.inference.mcmc.settings import MCMCSettings
 
 if TYPE_CHECKING:
     from bayes_mr.run.plan import Budget
@@ -108,20 +122,68 @@ def form_least_squares(form: str, lsq, part_a, part_b, seed: int, noise: str) ->
     return fit, row, data
 
 
-def pool_spent(pool_s: float, used: dict[str, float]) -> str:
-    """Why a posterior was not started: nothing is left of the pool (the forms that spent it, with their seconds)."""
-    spent = "".join(f", {m} {s:.0f} s" for m, s in used.items())
-    return f"the posteriors' pool of {pool_s:g} s is spent ({spent[2:] or 'nothing yet'}): not run"
+#: Significant figures of an evaluation's price: the schedule's count is the same on every machine and thread
+#: count, and rounding it keeps a kernel's last-bit difference at a sub-step bound from moving a budget decision.
+PRICE_FIGURES = 3
+
+
+def evaluation_price(lik, res) -> int:
+    """What one log-density evaluation of ``lik`` is charged [integrator steps]: the RK4 sub-steps and Rosenbrock
+    steps of one simulation of its record at the least-squares optimum ``res`` the chain starts from
+    (:attr:`bayes_mr.simulation.simulate.Simulation.schedule`), to :data:`PRICE_FIGURES` significant figures.
+
+    Fixed by the record and that fit, whatever the machine: the simulation is what an evaluation costs, and its
+    sub-steps are set by the model's stiffness at the parameters, which near the posterior's bulk are those of
+    the optimum.
+    """
+    steps = int(np.abs(lik.simulate(np.atleast_2d(res.phi)).schedule[0]).sum())
+    return max(1, int(float(f"{steps:.{PRICE_FIGURES}g}")))
+
+
+def pool_spent(pool: float, work: dict[str, dict]) -> str:
+    """Why a posterior was not started: the pool cannot pay one evaluation (the forms that spent it, with their
+    integrator steps)."""
+    spent = "".join(f", {m} {w['integrator_steps']:.3g}" for m, w in work.items() if w["integrator_steps"])
+    return f"the posteriors' pool of {pool:.3g} integrator steps is spent ({spent[2:] or 'nothing yet'}): not run"
+
+
+def _seconds(s: float) -> str:
+    """Seconds as the report writes them: whole ones, two figures below ten (a test's cap of 0.001 s)."""
+    return f"{s:.0f}" if s >= 10 else f"{s:.2g}"
+
+
+def cap_message(cap_s: float, pool_cap_s: float | None = None) -> str:
+    """What a posterior the wall-time cap stopped says: a machine limit, not a work-budget outcome."""
+    share = "" if pool_cap_s is None else f" (what the posteriors' {_seconds(pool_cap_s)} s cap left it)"
+    return f"stopped by the wall-time cap of {_seconds(cap_s)} s{share}: a machine limit, not a result"
+
+
+def cap_spent(pool_cap_s: float, work: dict[str, dict]) -> str:
+    """Why a posterior was not started: the posteriors' wall-time cap is spent (the forms that spent it)."""
+    spent = ", ".join(f"{m} {_seconds(w['wall_s'])} s" for m, w in work.items())
+    return (f"not run: the posteriors' wall-time cap of {_seconds(pool_cap_s)} s is spent "
+            f"({spent or 'nothing yet'}): a machine limit, not a result")
+
+
+def posterior_settings(mcmc: MCMCSettings, seed: int, evaluations: int | None, cap_s: float | None) -> MCMCSettings:
+    """A posterior's settings: ``mcmc`` with the seed, no bar, the work budget the pool leaves it (``evaluations``,
+    at most ``mcmc.max_evaluations``) and the wall-time cap (``cap_s``, at most ``mcmc.max_seconds``)."""
+    def least(a, b):
+        return b if a is None else a if b is None else min(a, b)
+
+    return replace(mcmc, seed=seed, progress=False, max_evaluations=least(mcmc.max_evaluations, evaluations),
+                   max_seconds=least(mcmc.max_seconds, cap_s))
 
 
 def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: int, fitted: dict,
-                   say) -> tuple[dict[str, tuple[dict, object]], dict[str, str]]:
-    """Each form's emcee posterior in ``order``, sharing ``budget.mcmc_pool_s``.
+                   say) -> tuple[dict[str, tuple[dict, object]], dict[str, str], dict[str, dict]]:
+    """Each form's emcee posterior in ``order``, sharing ``budget.mcmc_pool`` (work) under ``budget.mcmc_pool_cap_s``.
 
     Each chain starts from the form's least-squares fit of the first pass (``fitted``, :func:`least_squares_pass`),
     as :func:`bayes_mr.selection.comparison.compare` runs a model's ``lsq`` and ``mcmc`` rows from one fit; a form without
     one is fitted first (and fails as its ``lsq`` row did). Without a pool each posterior has
-    ``budget.mcmc.max_seconds`` alone; with one, at most that and what the earlier posteriors left.
+    ``budget.mcmc.max_evaluations`` alone; with one, at most that and what the earlier posteriors left, at its
+    form's :func:`evaluation_price`.
 
     Parameters
     ----------
@@ -130,7 +192,7 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
     order : list of str
         :func:`posterior_order`.
     budget : Budget
-        Uses ``mcmc``, ``mcmc_pool_s``, ``evidence`` and ``noise``.
+        Uses ``mcmc``, ``mcmc_pool``, ``mcmc_pool_cap_s``, ``evidence`` and ``noise``.
     seed : int
     fitted : dict
         Form → (likelihood, LSQResult) on ``part_a`` (:func:`least_squares_pass`).
@@ -141,32 +203,60 @@ def run_posteriors(part_a, part_b, order: list[str], budget: Budget, *, seed: in
     fits : dict
         Form → (``mcmc`` row, InferenceData or None) of every posterior started (or failed).
     skipped : dict
-        Form → why no posterior was run (:class:`bayes_mr.inference.mcmc.wall_time.OverBudget`'s reason, or the pool
-        spent).
+        Form → why no posterior was run (:class:`bayes_mr.inference.mcmc.budget.OverBudget`'s reason, the pool
+        spent, or the wall-time cap spent).
+    work : dict
+        Form → what its posterior spent and under which limits (:func:`_work_entry`).
     """
-    pool = budget.mcmc_pool_s
-    cap = budget.mcmc.max_seconds
-    fits, skipped, used = {}, {}, {}
+    pool, pool_cap = budget.mcmc_pool, budget.mcmc_pool_cap_s
+    fits, skipped, work = {}, {}, {}
     for form in order:
-        left = math.inf if pool is None else pool - sum(used.values())
-        if left <= 0:
-            skipped[form] = pool_spent(pool, used)
+        spent, wall = sum(w["integrator_steps"] for w in work.values()), sum(w["wall_s"] for w in work.values())
+        left = None if pool is None else pool - spent
+        if pool_cap is not None and wall >= pool_cap:
+            skipped[form] = cap_spent(pool_cap, work)
+            work[form] = _work_entry(None, 0, left, 0.0, 0.0, skipped[form])
             say(f"{form} × mcmc: {skipped[form]}")
             continue
-        seconds = min(left, cap if cap is not None else math.inf)
-        settings = replace(budget.mcmc, seed=seed, progress=False,
-                           max_seconds=None if math.isinf(seconds) else seconds)
-        mcmc = Emcee(settings=settings, evidence=budget.evidence)
-        lsq = None if form in fitted else LeastSquares(settings=Emcee.lsq_settings(seed))
-        say(f"{form} × mcmc …")
         t0 = _time.perf_counter()
-        row, idata = lsq_mcmc_job(form, lsq, mcmc, part_a, part_b, seed, False, budget.noise,
-                                  fitted=fitted.get(form))[-1]
-        used[form] = _time.perf_counter() - t0
+        try:
+            lik, res = fitted.get(form) or least_squares(form, LeastSquares(settings=Emcee.lsq_settings(seed)),
+                                                         part_a, budget.noise)
+            price = evaluation_price(lik, res)
+        except FIT_ERRORS as exc:
+            fits[form] = (error_row(form, "mcmc", exc, _time.perf_counter() - t0), None)
+            work[form] = _work_entry(None, 0, left, _time.perf_counter() - t0, None, None)
+            say(row_message(form, "mcmc", fits[form][0]))
+            continue
+        if left is not None and left < price:
+            skipped[form] = pool_spent(pool, work)
+            work[form] = _work_entry(price, 0, left, _time.perf_counter() - t0, None, None)
+            say(f"{form} × mcmc: {skipped[form]}")
+            continue
+        cap = None if pool_cap is None else pool_cap - wall
+        settings = posterior_settings(budget.mcmc, seed, None if left is None else int(left // price), cap)
+        say(f"{form} × mcmc …")
+        row, idata = lsq_mcmc_job(form, None, Emcee(settings=settings, evidence=budget.evidence), part_a, part_b,
+                                  seed, False, budget.noise, fitted=(lik, res))[-1]
+        capped = row.get("stopped") == "max_seconds"
+        work[form] = _work_entry(price, int(row.get("evaluations") or 0), left, _time.perf_counter() - t0,
+                                 settings.max_seconds, cap_message(settings.max_seconds, pool_cap) if capped else None)
         say(row_message(form, "mcmc", row))
         why = over_budget(row.get("error"))
-        if why:  # not a failure: a posterior the budget could not converge, not started (budget.py)
-            skipped[form] = why
+        if why:  # not a failure: a posterior the work budget could not converge, not started (budget.py)
+            skipped[form] = why if left is None else (
+                f"{why} (the pool has {left:.3g} of its {pool:.3g} integrator steps left, {price} an evaluation)")
         else:
             fits[form] = (row, idata)
-    return fits, skipped
+    return fits, skipped, work
+
+
+def _work_entry(price: int | None, evaluations: int, left: float | None, wall_s: float, cap_s: float | None,
+                machine_limit: str | None) -> dict:
+    """One form's line of ``summary.json``'s ``posterior_work``: ``evaluations`` (walker-steps of pilot, rounds and
+    chain), ``steps_per_evaluation`` (:func:`evaluation_price`), ``integrator_steps`` (their product: what the pool
+    was charged), ``pool_left`` (integrator steps the pool had before it), ``wall_s``, ``wall_cap_s`` (the cap it
+    ran under) and ``machine_limit`` (what the wall-time cap did to it, or None)."""
+    return {"evaluations": evaluations, "steps_per_evaluation": price,
+            "integrator_steps": evaluations * (price or 0), "pool_left": left, "wall_s": wall_s,
+            "wall_cap_s": cap_s, "machine_limit": machine_limit}

@@ -202,6 +202,29 @@ def _second_record_section(summary: dict) -> list[str]:
     return out
 
 
+def work_lines(summary: dict) -> list[str]:
+    """The report's account of the posteriors' work: per form the log-density evaluations, their price and what the
+    pool was charged, the wall time beside it, and any wall-time cap that acted (a machine limit, not a result)."""
+    work = summary.get("posterior_work") or {}
+    if not work:
+        return []
+    budget = summary.get("budget") or {}
+    pool, cap = budget.get("mcmc_pool"), budget.get("mcmc_pool_cap_s")
+    spent = sum(w["integrator_steps"] for w in work.values())
+    charged = (f"a pool of {pool:.3g} integrator steps, {float(spent):.3g} spent" if pool else
+               f"no pool, {float(spent):.3g} integrator steps spent")
+    head = (f"Posteriors' work ({charged}; {f'wall-time cap {cap:.0f} s' if cap else 'no wall-time cap'}, "
+            f"{sum(w['wall_s'] for w in work.values()):.0f} s used):")
+    lines = ["", head, ""]
+    for form, w in work.items():
+        price = w["steps_per_evaluation"]
+        charged = (f"{w['evaluations']} log-density evaluations × {price} integrator steps = "
+                   f"{float(w['integrator_steps']):.3g}" if price else "no evaluation")
+        lines.append(f"- {form}: {charged}, {w['wall_s']:.0f} s"
+                     + (f"; {w['machine_limit']}" if w.get("machine_limit") else "") + ".")
+    return lines
+
+
 def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> str:
     """``report.md`` of the main job."""
     out = ["# bayes_mr main job: the measured MR damper", ""]
@@ -221,6 +244,7 @@ def report_markdown(summary: dict, tab: pd.DataFrame, params: pd.DataFrame) -> s
             f"- {r['model']}: {r.get('n_steps')} steps, τ_max {fmt(r.get('tau_max'), 3)}, R-hat_max "
             f"{fmt(r.get('rhat_max'), 4)}, {'converged' if r.get('converged') else 'NOT converged (' + str(r.get('stopped', 'budget')) + ')'}"
             f"{chain_shape(r.get('geometry'))}." for r in conv]
+    out += work_lines(summary)
     out += ["", "![force on part B](force_part_b.png)", "", "![loops on part B](hysteresis_part_b.png)", "",
             "![force–velocity by command](force_velocity_part_b.png)", "",
             "![residual by velocity](residual_velocity_part_b.png)", "",

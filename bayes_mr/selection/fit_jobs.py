@@ -16,7 +16,7 @@ from bayes_mr.inference import results
 from bayes_mr.execution.executor import Outcome
 from bayes_mr.inference.identify import Identify
 from bayes_mr.inference.identify import validate as validate_fit
-from bayes_mr.inference.mcmc.wall_time import over_budget
+from bayes_mr.inference.mcmc.budget import over_budget
 from bayes_mr.inference.estimators import Emcee, LeastSquares, engine
 from bayes_mr.inference.lsq.least_squares import LSQResult, fit_lsq
 from bayes_mr.likelihood.output_error import OutputError
@@ -43,7 +43,7 @@ def error_row(model: str, engine_name: str, exc: Exception, wall_s: float) -> di
 
 def row_message(model: str, engine_name: str, row: dict) -> str:
     """What a finished row says in the progress: its evidence, MSE and seconds; why a budget did not run it
-    (:func:`~bayes_mr.inference.mcmc.wall_time.over_budget`); or why it failed."""
+    (:func:`~bayes_mr.inference.mcmc.budget.over_budget`); or why it failed."""
     head = f"{model} × {engine_name}: "
     if "error" in row:
         why = over_budget(row["error"])

@@ -189,9 +189,10 @@ def test_same_seed_gives_the_same_chain_bit_for_bit():
     assert not np.array_equal(a.chain, c.chain)
 
 
-def test_a_wall_time_budget_stops_the_run_and_says_so():
-    """A slow density (5 ms a call) with a 0.3-s budget: the run stops within a step or two of the
-    budget, long before ``max_steps``, is checked there and is flagged not converged, "max_seconds"."""
+def test_the_wall_time_cap_stops_the_run_and_says_so():
+    """A slow density (5 ms a call) with a 0.3-s cap: the run stops within a step or two of the cap, long before
+    ``max_steps``, is checked there and is flagged not converged, "max_seconds" (a machine limit), with the cap
+    it ran under and the evaluations it spent."""
     import time
 
     mu, C, _, fast = correlated_gaussian(3, seed=2)
@@ -206,6 +207,8 @@ def test_a_wall_time_budget_stops_the_run_and_says_so():
     assert 1 <= res.n_steps < 250
     assert not res.converged and res.stopped == "max_seconds"
     assert res.history[-1]["step"] == res.n_steps
+    assert res.max_seconds == 0.3 and res.max_evaluations is None
+    assert res.evaluations == res.pilot_steps * 12 + res.n_steps * res.n_walkers
     free = sample(fast, mu, C, MCMCSettings(seed=1, progress=False))
     assert free.converged and free.stopped == "converged"
     # the check the clock forces sits off the check_every grid; a chain that meets the rule there is converged,
@@ -216,94 +219,107 @@ def test_a_wall_time_budget_stops_the_run_and_says_so():
     t1 = time.perf_counter()
     assert sample(fast, mu, C, de).converged
     budget = max(2.0, 3.0 * (time.perf_counter() - t1))
-    late = sample(fast, mu, C, replace(de, max_steps=10**6, max_seconds=budget, check_every=10**6))
-    assert late.n_steps < 10**6 and late.history[-1]["step"] == late.n_steps
+    # (10⁵ steps, not more: emcee allocates the steps asked of it at once, and 10⁶ of them took seconds of a busy
+    # machine before the first step, past the cap)
+    late = sample(fast, mu, C, replace(de, max_steps=10**5, max_seconds=budget, check_every=10**5))
+    assert late.n_steps < 10**5 and late.history[-1]["step"] == late.n_steps
     assert late.converged and late.stopped == "converged"
 
 
-def test_a_budget_that_leaves_room_for_the_chain_does_not_change_the_adaptation():
-    """A slow density (3 ms a call) and a budget of 1.8 × what the unbudgeted run's pilot and rounds took: the
-    rounds may spend what the budget leaves after the chain proper's first MIN_CHAIN_STEPS steps, so they end by
-    their own rules, as without a budget, and the chain is the unbudgeted one's, step for step, until the clock
-    stops it. (A fixed share of the budget for pilot and rounds, e.g. half, would cut the final adaptation round
-    short: a q that depends on the machine's speed.)"""
+def test_a_work_budget_that_leaves_room_for_the_chain_does_not_change_the_adaptation():
+    """A work budget of what the unbudgeted run's pilot and rounds evaluated plus the chain proper's reserve
+    (MIN_CHAIN_STEPS steps of its 8 walkers): the rounds end by their own rules, as without a budget, and the chain
+    is the unbudgeted one's, step for step, until the budget stops it. One evaluation less and the last round no
+    longer fits whole: it is not run (a round is never cut, so q never depends on where a budget fell)."""
+    from bayes_mr.inference.mcmc.adapt import chain_reserve
+
+    mu, C, _, fast = correlated_gaussian(20, seed=2)  # 20-d: the pilot has not mixed, two rounds follow
+    s = MCMCSettings(seed=3, progress=False)
+    free = sample(fast, mu, C, s)
+    assert len(free.adapt_acceptance) == 2 and free.max_evaluations is None
+    adaptation = free.pilot_steps * s.walkers(20)
+    assert free.evaluations == adaptation + free.n_steps * free.n_walkers
+    budget = adaptation + chain_reserve(20, s)
+    held = sample(fast, mu, C, replace(s, max_evaluations=budget))
+    assert held.pilot_steps == free.pilot_steps and held.adapt_acceptance == free.adapt_acceptance
+    assert 0 < held.n_steps <= free.n_steps and held.evaluations <= budget == held.max_evaluations
+    assert np.array_equal(held.chain, free.chain[:held.n_steps])
+    assert held.stopped in ("converged", "max_evaluations")
+    short = sample(fast, mu, C, replace(s, max_evaluations=budget - 1))
+    assert short.pilot_steps == free.pilot_steps - s.adapt_steps
+    assert short.adapt_acceptance == free.adapt_acceptance[:-1] and short.evaluations <= budget - 1
+
+
+def test_a_work_budget_gives_the_same_chain_on_a_slow_machine():
+    """The same seed and work budget with the density made slow (2 ms a call, as on a busy machine) and fast: the
+    same adaptation rounds, the same chain step for step, the same stop and the same count of evaluations. The
+    budget binds (it holds the pilot and one round, and the chain stops on it), so it is what decides."""
     import time
 
     mu, C, _, fast = correlated_gaussian(4, seed=2)
-    calls = []
 
     def slow(X):
-        calls.append((time.perf_counter(), len(X)))
-        time.sleep(0.003)
+        time.sleep(0.002)
         return fast(X)
 
-    sample(fast, mu, C, MCMCSettings(seed=3, progress=False))  # one-off costs (imports, first checks) not timed
-    free = sample(slow, mu, C, MCMCSettings(seed=3, progress=False))
-    # the chain proper (8 walkers, the independence move alone) evaluates all 8 at once, call after call; the
-    # pilot and rounds (16 walkers, mixed moves) never end on such a run: where it starts, the adaptation ended
-    # — its wall time as this run measured it (sleep, density and emcee's own work)
-    t, size = np.array(calls).T
-    adaptation = t[len(size) - np.argmax(size[::-1] != 8)] - t[0]
-    timed = sample(slow, mu, C, MCMCSettings(seed=3, progress=False, max_seconds=1.8 * adaptation))
-    assert timed.pilot_steps == free.pilot_steps and timed.adapt_acceptance == free.adapt_acceptance
-    assert 0 < timed.n_steps <= free.n_steps
-    assert np.array_equal(timed.chain, free.chain[:timed.n_steps])
+    # an R-hat no chain reaches: the budget, not the rule, ends it
+    s = MCMCSettings(seed=3, progress=False, rhat_max=1.000001, max_evaluations=300 * 16 + 250 * 8)
+    a, b = sample(fast, mu, C, s), sample(slow, mu, C, s)
+    assert a.pilot_steps == b.pilot_steps == 300 and a.adapt_acceptance == b.adapt_acceptance
+    assert np.array_equal(a.chain, b.chain) and np.array_equal(a.log_prob, b.log_prob)
+    assert a.stopped == b.stopped == "max_evaluations" and a.n_steps == 250
+    assert a.evaluations == b.evaluations == s.max_evaluations
 
 
 def test_a_chain_that_cannot_meet_the_rule_in_its_budget_stops_when_that_is_projected():
-    """30-d correlated target, differential-evolution moves alone, 1 ms a call, a 3-s budget: the chain's
-    integrated time projects the rule (≈ 55 τ steps) past the budget within a few checks, and the run stops
-    there — "projected", with the numbers — instead of running into the limit (measured: steps 100-150 of
-    seeds 0-2, ~1 s)."""
-    import time
-
+    """30-d correlated target, differential-evolution moves alone on 120 walkers, a work budget of 400 steps: the
+    chain's integrated time projects the rule (≈ 55 τ steps) past it within a few checks, and the run stops there
+    — "projected", with the numbers in steps and evaluations — instead of running into the limit (measured:
+    steps 100-150 of seeds 0-2)."""
     from bayes_mr.inference.mcmc.convergence import MIN_PROJECTION_STEPS
 
     mu, C, _, fast = correlated_gaussian(30, seed=3)
-
-    def slow(X):
-        time.sleep(0.001)
-        return fast(X)
-
-    t0 = time.perf_counter()
-    res = sample(slow, mu, C, MCMCSettings(seed=0, max_seconds=3.0, pilot_steps=0, moves=(("de", 1.0),),
+    res = sample(fast, mu, C, MCMCSettings(seed=0, max_evaluations=400 * 120, pilot_steps=0, moves=(("de", 1.0),),
                                            progress=False))
-    assert time.perf_counter() - t0 < 3.0
     assert not res.converged and res.stopped == "projected"
-    assert MIN_PROJECTION_STEPS <= res.n_steps < 400
+    assert MIN_PROJECTION_STEPS <= res.n_steps < 400 and res.evaluations == res.n_steps * 120
     p = res.projection
-    assert p["steps_needed"] > res.n_steps and p["seconds_needed"] > p["budget_s"] == 3.0
+    assert p["steps_needed"] > p["steps_allowed"] == 400 and p["evaluations_allowed"] == 400 * 120
+    assert p["evaluations_needed"] == p["steps_needed"] * 120
     assert p["tau_max"] == pytest.approx(res.history[-1]["tau_max"])
 
 
 def test_the_projection_needs_enough_steps_and_a_budget():
-    """No projection before MIN_PROJECTION_STEPS of this run, without a budget, or while the rule fits."""
+    """No projection before MIN_PROJECTION_STEPS of the chain, without a work budget, or while the rule fits."""
     from bayes_mr.inference.mcmc.convergence import MIN_PROJECTION_STEPS, projection
 
     s = MCMCSettings()  # rule: (5 + 50) τ steps
-    assert projection(10.0, 100, MIN_PROJECTION_STEPS - 1, 1.0, 2.0, s) is None
-    assert projection(10.0, 100, 100, 1.0, float("inf"), s) is None
-    assert projection(10.0, 100, 100, 1.0, 5.5, s) is None  # 550 steps at 10 ms = 5.5 s: fits exactly
-    p = projection(10.0, 100, 100, 1.0, 5.4, s)
-    assert p == {"tau_max": 10.0, "steps_needed": 550, "seconds_needed": pytest.approx(5.5), "budget_s": 5.4}
+    assert projection(10.0, MIN_PROJECTION_STEPS - 1, 100, s) is None
+    assert projection(10.0, 100, None, s) is None
+    assert projection(10.0, 100, 550, s) is None  # 550 steps needed, 550 allowed: fits exactly
+    assert projection(10.0, 100, 549, s) == {"tau_max": 10.0, "steps_needed": 550, "steps_allowed": 549}
 
 
 class Interrupt(Exception):
     pass
 
 
+@pytest.mark.parametrize("budget", [None, 300 * 16 + 250 * 8])
 @pytest.mark.parametrize("where", ["pilot", "adapt0", "chain"])
-def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, where):
+def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, where, budget):
     """The log-density raises mid-run (a killed job); resuming from the HDF5 checkpoint finishes it.
 
     Killed in the pilot chain (which fits the independence proposal), in its
     first adaptation round or in the chain proper: the resumed chain, its
     diagnostics and the stopping step equal those of a run that was never
     interrupted — the backend carries emcee's random state, and the pilot's
-    and rounds' own groups give the same proposal.
+    and rounds' own groups give the same proposal. With a work budget that holds the pilot, one round and the
+    chain's first 250 steps, too: it is counted from the stored steps, so the resumed run spends it as the
+    uninterrupted one did.
     """
     mu, C, _, log_prob = correlated_gaussian(4, seed=4)
-    settings = {"seed": 5, "progress": False, "check_every": 100, "min_tau_multiple": 20.0, "rhat_max": 1.05}
+    settings = {"seed": 5, "progress": False, "check_every": 100, "min_tau_multiple": 20.0, "rhat_max": 1.05,
+                "max_evaluations": budget}
     counted = {"n": 0, "starts": []}
 
     def counting(X):
@@ -336,7 +352,8 @@ def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, wher
     resumed = sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **settings))
     assert np.array_equal(resumed.chain, whole.chain)
     assert np.array_equal(resumed.log_prob, whole.log_prob)
-    assert (resumed.burn, resumed.converged) == (whole.burn, whole.converged)
+    assert (resumed.burn, resumed.converged, resumed.stopped) == (whole.burn, whole.converged, whole.stopped)
+    assert resumed.evaluations == whole.evaluations and resumed.pilot_steps == whole.pilot_steps
     np.testing.assert_array_equal(resumed.tau, whole.tau)
     with pytest.raises(ValueError, match="seed"):
         sample(log_prob, mu, C, MCMCSettings(backend=path, resume=True, **{**settings, "seed": 6}))
@@ -456,29 +473,31 @@ def test_crosscheck_z_scores_in_phi_and_theta():
 
 
 def test_a_posterior_projected_past_its_budget_is_not_started():
-    """check_budget times one ensemble evaluation and projects the pilot plus MIN_CHAIN_STEPS steps: a
-    log-density that takes ≥ 20 ms per call projects ≥ 10 s, over a 5 s budget (OverBudget, with the numbers)
-    and within a 600 s one (the measured step is returned). The first call is not timed: on a fresh machine it
-    compiles the batched kernel (here it sleeps 2 s, which would project 1000 s and refuse the 600 s budget);
-    of the timed calls the fastest counts (here the first of them is held up 2 s, as by another job)."""
-    import time
+    """check_budget counts the pilot and one round on the ensemble plus MIN_CHAIN_STEPS steps of the chain's
+    walkers, in log-density evaluations, and refuses (OverBudget, with the numbers) a budget below that; sample
+    refuses such a run before its first evaluation."""
+    from bayes_mr.inference.mcmc.budget import MIN_CHAIN_STEPS, OverBudget, check_budget, over_budget
 
-    from bayes_mr.inference.mcmc.wall_time import MIN_CHAIN_STEPS, TIMED_CALLS, OverBudget, check_budget, over_budget
-
+    assert check_budget(12, 200, 10**6) == (200 + MIN_CHAIN_STEPS) * 12
+    with pytest.raises(OverBudget, match=rf"\(200 steps × 12 walkers\) .* \({MIN_CHAIN_STEPS} × 12 walkers\) need "
+                                         rf"{(200 + MIN_CHAIN_STEPS) * 12} log-density evaluations, more than the "
+                                         rf"5000 its work budget leaves it: not run"):
+        check_budget(12, 200, 5000)
+    # a chain proper of 8 of the 12 walkers: 2400 + 2000 evaluations
+    assert check_budget(12, 200, 4400, chain_walkers=8) == 4400
+    with pytest.raises(OverBudget, match=rf"\({MIN_CHAIN_STEPS} × 8 walkers\) need 4400"):
+        check_budget(12, 200, 4399, chain_walkers=8)
     calls = []
 
-    def slow(x):
-        time.sleep(2.0 if len(calls) in (0, 1) else 0.02)
-        calls.append(np.shape(x))
+    def counted(x):
+        calls.append(len(x))
         return -0.5 * np.sum(np.atleast_2d(x) ** 2, axis=1)
 
-    assert 0.02 <= check_budget(slow, np.zeros(3), 12, 200, 600.0) < 1.0
-    with pytest.raises(OverBudget, match=rf"pilot \(200 steps\) .* \({MIN_CHAIN_STEPS}\) would take ~\d+ s"):
-        check_budget(slow, np.zeros(3), 12, 200, 5.0)
-    # a chain proper of 8 of the 12 walkers: its steps cost 8/12 of the timed ensemble's (~7 s, still over 5 s)
-    with pytest.raises(OverBudget, match=rf"\({MIN_CHAIN_STEPS} of 8 walkers\) would take"):
-        check_budget(slow, np.zeros(3), 12, 200, 5.0, chain_walkers=8)
-    assert calls == [(12, 3)] * (3 * (1 + TIMED_CALLS))  # the whole ensemble at each call
+    with pytest.raises(OverBudget):
+        sample(counted, np.zeros(3), np.eye(3), MCMCSettings(max_evaluations=4399, progress=False))
+    assert calls == []
+    with pytest.raises(ValueError, match="max_evaluations"):
+        MCMCSettings(max_evaluations=0)
     # a job's error string (executor.Outcome) names it: the main job lists it as not run, not as failed
     assert over_budget("OverBudget: one step …") == "one step …"
     assert over_budget("ValueError: OverBudget: no") is None and over_budget(None) is None

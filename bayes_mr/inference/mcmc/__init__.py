@@ -8,7 +8,7 @@
 * :mod:`.chain` — running the chain with its HDF5 checkpoint, and :class:`~.chain.MCMCResult`;
 * :mod:`.convergence` — burn-in, autocorrelation times, R-hat and the stopping rule;
 * :mod:`.geometry` — what made a posterior slow to sample;
-* :mod:`.wall_time` — whether a run fits a wall-time budget.
+* :mod:`.budget` — whether a run fits its work budget, counted in log-density evaluations.
 """
 
 from bayes_mr.inference.mcmc.chain import MCMCResult

@@ -8,7 +8,7 @@ the pilot has not mixed, so up to ``adapt_rounds`` rounds follow, each run with 
 each refitting q to its own second half; they end when q fits (:data:`ADAPT_ACCEPT`) or stops improving
 (:data:`ADAPT_GAIN`, above :data:`ADAPT_FLOOR`). Every part holds its proposal fixed, so each is an exact
 Metropolis–Hastings chain; none is part of the result. Where the adaptation *settled* the chain proper
-proposes from q alone on ``chain_walkers`` independent walkers; where the rounds or the budget ran out first
+proposes from q alone on ``chain_walkers`` independent walkers; where the rounds or the work budget ran out first
 q may still underweight part of the target, and the chain keeps the rounds' mixture on 2·d + 2 walkers.
 ``tests/inference/test_mcmc.py`` runs both outcomes.
 """
@@ -24,7 +24,7 @@ from bayes_mr.inference.mcmc.moves import local_moves
 from bayes_mr.inference.mcmc.proposal import fit_proposal
 from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.inference.mcmc.start import child_seed
-from bayes_mr.inference.mcmc.wall_time import MIN_CHAIN_STEPS
+from bayes_mr.inference.mcmc.budget import MIN_CHAIN_STEPS
 
 #: Spawn key of the pilot chain's seed; the adaptation rounds' are the keys below it.
 PILOT_KEY = 2**31 - 1
@@ -47,9 +47,11 @@ def adapt(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, g
     """Run the pilot, fit the proposal to its second half, and refit it over the adaptation rounds.
 
     Each part's seed is a fixed child of the run's and has its own HDF5 group (``<group>_pilot``,
-    ``<group>_adapt<k>``), so a resumed run refits the same proposal. With a wall-time budget the rounds may
-    spend what it leaves after the chain proper's first steps (:func:`chain_reserve`), so their number is set
-    by the rules above, not by the machine's speed, unless the budget is too tight for them.
+    ``<group>_adapt<k>``), so a resumed run refits the same proposal. With a work budget
+    (``max_evaluations``) a round runs only if it fits, whole, in what the budget leaves after the chain proper's
+    first steps (:func:`chain_reserve`): the number of rounds is set by the rules above and by counted
+    evaluations, never by the machine's speed. The wall-time cap (``max_seconds``) only ends the adaptation
+    where it cuts a round short (the chain proper then stops on it at once, flagged).
 
     Returns
     -------
@@ -62,28 +64,33 @@ def adapt(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, g
     acceptance : tuple of float
         Mean acceptance of each adaptation round.
     settings : MCMCSettings
-        The chain's settings, its wall-time budget less what the pilot and rounds spent, and the rounds'
-        moves (``adapt_moves``) where the adaptation did not settle.
+        The chain's settings: its work budget and wall-time cap less what the pilot and rounds spent, and the
+        rounds' moves (``adapt_moves``) where the adaptation did not settle.
+    evaluations : int
+        Log-density evaluations of the pilot and the rounds (walker-steps).
     """
-    pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves),
+    pilot_settings = replace(settings, moves=local_moves(settings.adapt_moves), max_evaluations=None,
                              max_steps=settings.pilot_steps, check_every=settings.pilot_steps,
                              seed=child_seed(settings.seed, PILOT_KEY))
     part = run_chain(log_prob, x0_center, x0_cov, pilot_settings, names, initial=initial,
                      group=group + "_pilot", bounds=bounds)
     proposal = fit_proposal(_second_half(part), bounds)
-    spent, steps, acceptance, settled = part.wall_s, part.n_steps, [], False
-    allowance = None if settings.max_seconds is None else settings.max_seconds - chain_reserve(part, settings)
+    d = part.chain.shape[-1]
+    spent, wall, steps, acceptance, settled = _work(part), part.wall_s, part.n_steps, [], False
+    allowance = None if settings.max_evaluations is None else settings.max_evaluations - chain_reserve(d, settings)
+    capped = part.stopped == "max_seconds"
     for k in range(settings.adapt_rounds):
-        left = None if allowance is None else allowance - spent
-        if left is not None and left <= 0:
-            break
         n = settings.adapt_steps
-        round_settings = replace(settings, moves=settings.adapt_moves, max_seconds=left, max_steps=n, check_every=n,
-                                 seed=child_seed(settings.seed, PILOT_KEY - 1 - k))
+        if capped or (allowance is not None and spent + n * part.n_walkers > allowance):
+            break
+        cap = None if settings.max_seconds is None else max(settings.max_seconds - wall, 0.0)
+        round_settings = replace(settings, moves=settings.adapt_moves, max_evaluations=None, max_seconds=cap,
+                                 max_steps=n, check_every=n, seed=child_seed(settings.seed, PILOT_KEY - 1 - k))
         part = run_chain(log_prob, x0_center, x0_cov, round_settings, names, initial=part.chain[-1],
                          group=f"{group}_adapt{k}", proposal=proposal, bounds=bounds)
-        spent, steps = spent + part.wall_s, steps + part.n_steps
-        if part.n_steps < n:  # the budget ran out in the round: too short to refit q from or to judge it by
+        spent, wall, steps = spent + _work(part), wall + part.wall_s, steps + part.n_steps
+        if part.n_steps < n:  # the cap cut the round: too short to refit q from or to judge it by
+            capped = True
             break
         proposal = fit_proposal(_second_half(part), bounds)
         acceptance.append(float(np.mean(part.acceptance)))
@@ -91,21 +98,26 @@ def adapt(log_prob, x0_center, x0_cov, settings: MCMCSettings, names, initial, g
                                                      and acceptance[-1] >= ADAPT_FLOOR)
         if settled:
             break
-    if settings.max_seconds is not None:
-        settings = replace(settings, max_seconds=max(settings.max_seconds - spent, 0.0))
+    # check_budget's count leaves the chain at least its reserve: the rounds never spend into it
+    settings = replace(settings, max_evaluations=None if settings.max_evaluations is None else (
+        settings.max_evaluations - spent), max_seconds=None if settings.max_seconds is None else (
+        0.0 if capped else max(settings.max_seconds - wall, 0.0)))
     if not settled:  # q may still be far from the target: the chain keeps the rounds' local moves
         settings = replace(settings, moves=settings.adapt_moves)
-    chain_start = part.chain[-1, :settings.walkers_after_pilot(part.chain.shape[-1])]
-    return chain_start, proposal, steps, tuple(acceptance), settings
+    chain_start = part.chain[-1, :settings.walkers_after_pilot(d)]
+    return chain_start, proposal, steps, tuple(acceptance), settings, spent
 
 
-def chain_reserve(pilot: MCMCResult, settings: MCMCSettings) -> float:
-    """Seconds the chain proper's first :data:`~bayes_mr.inference.mcmc.wall_time.MIN_CHAIN_STEPS` steps cost at
-    the pilot's measured cost per step and walker (its walkers after the pilot: ``settings.walkers_after_pilot``):
-    the projection :func:`~bayes_mr.inference.mcmc.wall_time.check_budget` started the run on."""
-    n_steps, n_walkers, d = pilot.chain.shape
-    per_walker_step = pilot.wall_s / max(n_steps * n_walkers, 1)
-    return MIN_CHAIN_STEPS * settings.walkers_after_pilot(d) * per_walker_step
+def chain_reserve(ndim: int, settings: MCMCSettings) -> int:
+    """Log-density evaluations of the chain proper's first :data:`~bayes_mr.inference.mcmc.budget.MIN_CHAIN_STEPS`
+    steps on its walkers (``settings.walkers_after_pilot``): what the adaptation leaves the chain at least, the
+    count :func:`~bayes_mr.inference.mcmc.budget.check_budget` started the run on."""
+    return MIN_CHAIN_STEPS * settings.walkers_after_pilot(ndim)
+
+
+def _work(part: MCMCResult) -> int:
+    """Log-density evaluations of one part: every walker once per step (walker-steps)."""
+    return part.n_steps * part.n_walkers
 
 
 def _second_half(res: MCMCResult) -> np.ndarray:

@@ -48,11 +48,19 @@ class MCMCResult:
     converged : bool
         The stopping rule was met.
     stopped : str
-        Why the run ended: ``"converged"``, ``"max_steps"``, ``"max_seconds"``,
-        ``"projected"`` (the rule projected past ``max_seconds``; see ``projection``) or ``"q_tails"``
-        (a chain of the independence move alone met the rule but its proposals' ``pareto_k`` did not).
+        Why the run ended: ``"converged"``, ``"max_steps"``, ``"max_evaluations"`` (its work budget spent),
+        ``"projected"`` (the rule projected past the work budget; see ``projection``), ``"q_tails"``
+        (a chain of the independence move alone met the rule but its proposals' ``pareto_k`` did not) or
+        ``"max_seconds"`` (the wall-time cap: a machine limit, not a result).
     wall_s : float
         Wall time of this call, its pilot included (a resumed run counts only its own part) [s].
+    evaluations : int
+        Log-density evaluations of the run: walker-steps of the chain and of its pilot and adaptation rounds
+        (stored steps of a resumed run included: the work the result stands on).
+    max_evaluations : int or None
+        The run's work budget [evaluations] (``MCMCSettings.max_evaluations`` as the call was given it).
+    max_seconds : float or None
+        The run's wall-time cap [s] (``MCMCSettings.max_seconds`` as the call was given it).
     seed_entropy : str
         Entropy of the run's SeedSequence.
     names : tuple of str
@@ -65,8 +73,8 @@ class MCMCResult:
     adapt_acceptance : tuple of float
         Mean acceptance of each adaptation round (:mod:`bayes_mr.inference.mcmc.adapt`).
     projection : dict or None
-        With ``stopped == "projected"``: ``tau_max``, ``steps_needed``,
-        ``seconds_needed`` and ``budget_s``
+        With ``stopped == "projected"``: ``tau_max``, ``steps_needed``, ``steps_allowed``,
+        ``evaluations_needed`` and ``evaluations_allowed`` of the chain proper
         (:func:`bayes_mr.inference.mcmc.convergence.projection`).
     pareto_k : float
         Pareto k̂ of the importance weights p/q of the independence move's proposals where a chain of that
@@ -91,6 +99,9 @@ class MCMCResult:
     adapt_acceptance: tuple[float, ...] = ()
     projection: dict | None = None
     pareto_k: float = float("nan")
+    evaluations: int = 0
+    max_evaluations: int | None = None
+    max_seconds: float | None = None
 
     @property
     def n_steps(self) -> int:
@@ -179,7 +190,7 @@ def run_chain(
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> MCMCResult:
     """One chain of ``settings.moves`` (no pilot: a move that needs a proposal is given ``proposal``) until the
-    stopping rule, ``max_steps`` or ``max_seconds``; arguments as :func:`~bayes_mr.inference.mcmc.sampler.sample`'s.
+    stopping rule, ``max_steps``, ``max_evaluations`` or ``max_seconds``; arguments as :func:`~bayes_mr.inference.mcmc.sampler.sample`'s.
 
     With ``settings.resume`` and a checkpoint the chain continues from its last stored step and random state.
     """
@@ -209,4 +220,6 @@ def run_chain(
         converged=bool(diag["converged"]), stopped=diag["stopped"],
         wall_s=_time.perf_counter() - t0, seed_entropy=entropy, names=tuple(names), history=history,
         projection=diag.get("projection"), pareto_k=float(diag.get("pareto_k", np.nan)),
+        evaluations=int(sampler.iteration) * n_walkers, max_evaluations=settings.max_evaluations,
+        max_seconds=settings.max_seconds,
     )

@@ -5,9 +5,10 @@ transient lives in the first half once the chain is a few τ long); burn-in
 ⌈``burn_tau_multiple`` · τ₀⌉ (at most half); and converged when the chain after burn-in is ``min_tau_multiple`` times its
 longest integrated time *and* every coordinate's rank-normalised split R-hat
 (walkers as chains) is below ``rhat_max``. :func:`run_until_converged` drives
-a sampler by that rule, within ``max_steps`` and an optional wall-time budget;
-with a budget, a chain whose own integrated time projects the rule past it
-stops at that check (:func:`projection`) instead of running into the limit.
+a sampler by that rule, within ``max_steps``, an optional work budget in
+log-density evaluations and an optional wall-time cap; with a work budget, a
+chain whose own integrated time projects the rule past it stops at that check
+(:func:`projection`) instead of running into the limit.
 
 A chain of the independence move alone adds one condition (:func:`tail_index`): its
 proposals are draws of q, and the Pareto k̂ of their importance weights p/q (Vehtari et
@@ -77,44 +78,41 @@ def convergence_check(chain: np.ndarray, settings) -> dict:
     return {"burn": burn, "tau": tau, "rhat": rhat, "ess": ess, "converged": converged}
 
 
-#: Steps of this run a budget projection needs before it is trusted (two checks at the default 50).
+#: Steps of the chain (stored ones included) a projection needs before it is trusted (two checks at the default 50).
 MIN_PROJECTION_STEPS = 100
 
 
-def projection(tau_max: float, step: int, steps_run: int, elapsed: float, budget: float, settings) -> dict | None:
-    """Whether the rule can still be met within the budget, from the chain's integrated time so far.
+def projection(tau_max: float, step: int, steps_allowed: int | None, settings) -> dict | None:
+    """Whether the rule can still be met within the work budget, from the chain's integrated time so far.
 
     The rule needs a chain of about (``burn_tau_multiple`` + ``min_tau_multiple``) · τ steps (burn-in and
-    the ≥ 50 τ after it); at the measured seconds per step this run has taken, the steps still missing
-    are projected. τ estimated from a short chain is low, so the projection is optimistic: it stops a chain
-    that cannot converge (spencer on the packaged damper: τ 23 after 315 steps, ~5000 needed at τ ≈ 99),
-    never one that could. R-hat is not projected.
+    the ≥ 50 τ after it), against the steps the budget allows the chain. τ estimated from a short chain is low,
+    so the projection is optimistic: it stops a chain that cannot converge (spencer on the packaged damper:
+    τ 23 after 315 steps, ~5000 needed at τ ≈ 99), never one that could. R-hat is not projected. Counted in
+    steps, never timed: the same chain stops at the same step on any machine.
 
     Parameters
     ----------
     tau_max : float
         Longest integrated time at this check [steps].
     step : int
-        Steps of the chain so far (stored ones included).
-    steps_run : int
-        Steps this run has taken (the per-step time is theirs).
-    elapsed, budget : float
-        Seconds this run has taken, and its budget [s].
+        Steps of the chain so far (stored ones included: a resumed run decides as an uninterrupted one).
+    steps_allowed : int or None
+        Steps of the chain its work budget allows in all (None: no budget).
     settings : MCMCSettings
 
     Returns
     -------
     dict or None
         None while the rule may still be met (or too few steps to tell); else ``tau_max``,
-        ``steps_needed``, ``seconds_needed`` (this run's, from its start) and ``budget_s``.
+        ``steps_needed`` and ``steps_allowed``.
     """
-    if not (math.isfinite(budget) and math.isfinite(tau_max)) or steps_run < MIN_PROJECTION_STEPS:
+    if steps_allowed is None or not math.isfinite(tau_max) or step < MIN_PROJECTION_STEPS:
         return None
     need = int(math.ceil((settings.burn_tau_multiple + settings.min_tau_multiple) * tau_max))
-    seconds = elapsed + max(need - step, 0) * elapsed / steps_run
-    if seconds <= budget:
+    if need <= steps_allowed:
         return None
-    return {"tau_max": tau_max, "steps_needed": need, "seconds_needed": seconds, "budget_s": budget}
+    return {"tau_max": tau_max, "steps_needed": need, "steps_allowed": int(steps_allowed)}
 
 
 #: Proposals a tail index needs before it can stop a chain (fewer: the condition is not applied). A run
@@ -151,13 +149,32 @@ def tail_index(log_weights: list[np.ndarray]) -> tuple[float, int]:
     return float(k), int(lw.size)
 
 
-def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> tuple[dict, list[dict]]:
-    """Advance an emcee sampler in blocks of ``check_every`` steps until the rule, ``max_steps`` or the budget.
+def last_step(settings, n_walkers: int) -> tuple[int, int | None]:
+    """The chain's last step (``max_steps``, or fewer where the work budget ends first) and the steps the work
+    budget allows (None: no budget), counted from the chain's start on ``n_walkers`` walkers."""
+    allowed = None if settings.max_evaluations is None else int(settings.max_evaluations) // n_walkers
+    last = settings.max_steps if allowed is None else min(settings.max_steps, allowed)
+    if last < 1:
+        raise ValueError(f"a work budget of {settings.max_evaluations} log-density evaluations allows no step of "
+                         f"{n_walkers} walkers")
+    return last, allowed
 
-    Checks fall at multiples of ``check_every`` counted from the chain's
-    start (stored steps included), so a resumed run takes the decisions of an
-    uninterrupted one. A run past ``settings.max_seconds`` stops after the
-    current step and is checked there (flagged not converged).
+
+def _stopped(diag: dict, tails: bool, it: int, settings, last: int, out_of_time: bool) -> str:
+    """Why the chain ends at this check (:func:`run_until_converged`): a rule or a budget before the wall-time cap."""
+    return ("converged" if diag["converged"] else "q_tails" if tails
+            else "max_steps" if it >= settings.max_steps else "max_evaluations" if it >= last
+            else "max_seconds" if out_of_time else "projected")
+
+
+def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> tuple[dict, list[dict]]:
+    """Advance an emcee sampler in blocks of ``check_every`` steps until the rule, ``max_steps``, the work budget
+    or the wall-time cap.
+
+    Checks fall at multiples of ``check_every`` counted from the chain's start (stored steps included), and the
+    work budget counts the chain's steps from its start too, so a resumed run takes the decisions of an
+    uninterrupted one. A run past the cap ``settings.max_seconds`` stops after the current step and is checked
+    there (flagged not converged: a machine limit).
 
     Parameters
     ----------
@@ -165,6 +182,7 @@ def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> 
     state : emcee.State
         Where the chain continues.
     settings : MCMCSettings
+        ``max_evaluations`` is the chain's own work budget (its walkers × steps).
     resuming : bool
         The state comes from a checkpoint (emcee skips its initial-state check).
     tail : callable, optional
@@ -175,22 +193,25 @@ def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> 
     Returns
     -------
     diag : dict
-        The last :func:`convergence_check`, with ``stopped`` (``"converged"``,
-        ``"max_steps"``, ``"max_seconds"``, ``"projected"``: the rule
-        projected past the budget, :func:`projection`, whose dict is then
-        ``diag["projection"]``, or ``"q_tails"``) and ``pareto_k`` (NaN without ``tail``).
+        The last :func:`convergence_check`, with ``stopped`` (``"converged"``, ``"max_steps"``,
+        ``"max_evaluations"`` (the work budget spent), ``"projected"`` (the rule projected past the work budget,
+        :func:`projection`, whose dict, with ``evaluations_needed`` and ``evaluations_allowed``, is then
+        ``diag["projection"]``), ``"max_seconds"`` (the wall-time cap) or ``"q_tails"``) and ``pareto_k``
+        (NaN without ``tail``).
     history : list of dict
         Each check: step, burn, tau_max, rhat_max (and pareto_k where it was taken).
     """
     t0 = time.perf_counter()
-    budget = math.inf if settings.max_seconds is None else float(settings.max_seconds)
-    it = it0 = int(sampler.iteration)
+    cap = math.inf if settings.max_seconds is None else float(settings.max_seconds)
+    walkers = int(sampler.nwalkers)
+    last, allowed = last_step(settings, walkers)
+    it = int(sampler.iteration)
     history: list[dict] = []
-    bar = progress_bar(settings.max_steps, "emcee", unit="step", enabled=settings.progress, initial=it)
+    bar = progress_bar(last, "emcee", unit="step", enabled=settings.progress, initial=it)
     try:
         while True:
-            out_of_time = time.perf_counter() - t0 > budget
-            if it > 0 and (it % settings.check_every == 0 or it >= settings.max_steps or out_of_time):
+            out_of_time = time.perf_counter() - t0 > cap
+            if it > 0 and (it % settings.check_every == 0 or it >= last or out_of_time):
                 diag = convergence_check(sampler.get_chain(), settings)
                 history.append({"step": it, "burn": diag["burn"], "tau_max": float(diag["tau"].max()),
                                 "rhat_max": float(diag["rhat"].max())})
@@ -203,15 +224,14 @@ def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> 
                 bar.set_postfix(tau=f"{diag['tau'].max():.1f}",
                                 N_over_tau=f"{(it - diag['burn']) / diag['tau'].max():.0f}",
                                 rhat=f"{diag['rhat'].max():.3f}")
-                ahead = None if diag["converged"] else projection(
-                    float(diag["tau"].max()), it, it - it0, time.perf_counter() - t0, budget, settings)
-                if diag["converged"] or tails or it >= settings.max_steps or out_of_time or ahead:
-                    diag["stopped"] = ("converged" if diag["converged"] else "q_tails" if tails
-                                       else "max_steps" if it >= settings.max_steps
-                                       else "max_seconds" if out_of_time else "projected")
-                    diag["projection"] = ahead if diag["stopped"] == "projected" else None
+                ahead = None if diag["converged"] else projection(float(diag["tau"].max()), it, allowed, settings)
+                if diag["converged"] or tails or it >= last or out_of_time or ahead:
+                    diag["stopped"] = _stopped(diag, tails, it, settings, last, out_of_time)
+                    diag["projection"] = None if diag["stopped"] != "projected" else {
+                        **ahead, "evaluations_needed": ahead["steps_needed"] * walkers,
+                        "evaluations_allowed": ahead["steps_allowed"] * walkers}
                     break
-            target = min(settings.max_steps, (it // settings.check_every + 1) * settings.check_every)
+            target = min(last, (it // settings.check_every + 1) * settings.check_every)
             # one step at a time through the generator so the bar moves; the backend saves every step
             # emcee's check that the walkers span the space serves its ensemble moves; independent walkers
             # (the independence move alone) may be fewer than the dimensions
@@ -220,7 +240,7 @@ def run_until_converged(sampler, state, settings, resuming: bool, tail=None) -> 
                 bar.update(1)
                 it += 1
                 resuming = False
-                if time.perf_counter() - t0 > budget:
+                if time.perf_counter() - t0 > cap:
                     break
     finally:
         bar.close()

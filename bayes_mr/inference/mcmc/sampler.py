@@ -29,8 +29,11 @@ Why these moves and walkers:
   p/q there, and the Pareto k̂ check stops such a chain unconverged (``stopped`` "q_tails";
   ``tests/inference/test_proposal_tails.py``).
 
-With a wall-time budget (``max_seconds``) the chain is checked once more where the budget runs out; a chain
-that meets the rule there is converged, else it stopped on "max_seconds".
+With a work budget (``max_evaluations``, :mod:`.budget`) a run that cannot hold its pilot, one adaptation round and
+the shortest chain the rule has held in is not started (:class:`~.budget.OverBudget`), and the rounds and the chain
+spend it by counted evaluations, so the same seed gives the same chain on any machine. The wall-time cap
+(``max_seconds``) is a safety net: the chain is checked once more where it acts; a chain that meets the rule there
+is converged, else it stopped on "max_seconds", a machine limit.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from dataclasses import replace
 import numpy as np
 
 from bayes_mr.inference.mcmc.adapt import adapt
+from bayes_mr.inference.mcmc.budget import check_budget
 from bayes_mr.inference.mcmc.chain import MCMCResult, run_chain
 from bayes_mr.inference.mcmc.settings import MCMCSettings
 from bayes_mr.inference.mcmc.start import LogDensity, start_from_lsq
@@ -92,19 +96,31 @@ def sample(
     MCMCResult
         With ``settings.resume`` and a checkpoint, the chain continued from its last stored step and
         random state (the seed and walker count must match the checkpoint's).
+
+    Raises
+    ------
+    OverBudget
+        With ``settings.max_evaluations``, before any evaluation, when the pilot, one adaptation round and
+        :data:`~.budget.MIN_CHAIN_STEPS` steps of the chain do not fit in it (:func:`~.budget.check_budget`).
     """
     t0 = _time.perf_counter()
     x0_center = np.asarray(x0_center, float)
     d = x0_center.size
     names = tuple(names) if names is not None else tuple(f"x{j}" for j in range(d))
-    pilot_steps, adapt_acceptance = 0, ()
-    if proposal is None and settings.pilot_length:
-        initial, proposal, pilot_steps, adapt_acceptance, settings = adapt(
+    pilot = proposal is None and settings.pilot_length > 0
+    if settings.max_evaluations is not None:
+        n = settings.walkers(d) if initial is None else int(np.shape(initial)[0])
+        check_budget(n, settings.pilot_length if pilot else 0, settings.max_evaluations,
+                     settings.walkers_after_pilot(d) if pilot else None)
+    given, pilot_steps, adapt_acceptance, spent = settings, 0, (), 0
+    if pilot:
+        initial, proposal, pilot_steps, adapt_acceptance, settings, spent = adapt(
             log_prob, x0_center, x0_cov, settings, names, initial, group, bounds)
     res = run_chain(log_prob, x0_center, x0_cov, settings, names, initial=initial, group=group,
                     proposal=proposal, bounds=bounds)
     return replace(res, wall_s=_time.perf_counter() - t0, pilot_steps=pilot_steps,
-                   adapt_acceptance=adapt_acceptance)
+                   adapt_acceptance=adapt_acceptance, evaluations=spent + res.evaluations,
+                   max_evaluations=given.max_evaluations, max_seconds=given.max_seconds)
 
 
 def fit_mcmc(lik, *, lsq=None, settings: MCMCSettings = MCMCSettings(), lsq_settings=None) -> MCMCResult:

@@ -49,13 +49,18 @@ class MCMCSettings:
         Every coordinate's rank-normalised split R-hat must be below this.
     max_steps : int
         Hard limit on steps (the result is then flagged not converged).
+    max_evaluations : int or None
+        Work budget of the call [log-density evaluations]: walker-steps, one evaluation per walker and step, of
+        the pilot, the adaptation rounds and the chain (:mod:`~.budget`). The rounds may spend what it leaves after
+        the chain proper's first :data:`~.budget.MIN_CHAIN_STEPS` steps (:func:`~.adapt.adapt`); the chain stops at
+        the check where its own integrated time projects the rule past what is left (``"projected"``,
+        :func:`~.convergence.projection`) or where it is spent (``"max_evaluations"``), flagged not converged.
+        Counted, not timed: what it lets the run compute is the same on any machine. None (default): no budget.
     max_seconds : float or None
-        Wall-time budget of the call [s]: the run stops after the step that exceeds it, or at an earlier
-        check where its own integrated time projects the rule past it (``"projected"``,
-        :func:`~.convergence.projection`), flagged not converged (``stopped`` says why). Where it is
-        stopped depends on the machine's speed; the steps up to there do not, as long as the budget leaves the
-        adaptation rounds room to end by their own rules (:func:`~.adapt.adapt` reserves the chain
-        proper's first steps, :data:`~.wall_time.MIN_CHAIN_STEPS`); None (default): no budget.
+        Wall-time cap of the call [s]: a safety net for a machine far slower than the work budget was set for,
+        deciding nothing else. The run stops after the step that exceeds it (``"max_seconds"``, flagged not
+        converged: a machine limit, not a result); an adaptation round it cuts short ends the adaptation. None
+        (default): no cap.
     check_every : int
         Steps between convergence checks (at multiples of it).
     moves : tuple of (str, float)
@@ -99,6 +104,7 @@ class MCMCSettings:
     burn_tau_multiple: float = 5.0
     rhat_max: float = 1.01
     max_steps: int = 20000
+    max_evaluations: int | None = None
     max_seconds: float | None = None
     check_every: int = 50
     moves: tuple[tuple[str, float], ...] = (("independence", 1.0),)
@@ -117,6 +123,9 @@ class MCMCSettings:
     def __post_init__(self):
         if self.max_steps < 1 or self.check_every < 1:
             raise ValueError(f"max_steps and check_every must be positive, got {self.max_steps}, {self.check_every}")
+        if self.max_evaluations is not None and not self.max_evaluations > 0:
+            raise ValueError(f"max_evaluations must be a positive number of log-density evaluations or None, "
+                             f"not {self.max_evaluations!r}")
         if self.adapt_rounds < 0 or self.adapt_steps < 2:
             raise ValueError(f"adapt_rounds must be ≥ 0 and adapt_steps ≥ 2, got {self.adapt_rounds}, "
                              f"{self.adapt_steps}")
