@@ -291,3 +291,32 @@ def effect_case(kind, effect, magnitude, seed):
     return simulated_record(kind, "dahl", {effect: table[effect][magnitude]}, seed=seed,
                             signal="amp" if effect == "small_amplitude_regime" else "blwn",
                             voltage=effect == "voltage_dependence")
+
+
+def held_command_device_record(duration: float = 4.0, fs: float = 500.0, seed: int = 3,
+                               noise: float = 0.005) -> tuple[xr.Dataset, dict]:
+    """A spencer device test whose switching command a DAC held between samples, from the reference simulator.
+
+    ``tests/reference_sim.py`` (scipy, the contract's equations) integrates Spencer et al.'s damper under a
+    band-limited displacement (5 Hz, 10 mm RMS) and an on/off voltage held from each sample to the next; the
+    record carries the imposed displacement and velocity as given, the voltage, and the force with white noise
+    of SD ``noise`` × its SD (its ``noise_sd_force`` attribute), and no ``command_interp`` attribute: reading
+    the command is left to the caller. Returns the record and the truth (parameter name → value [SI]).
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    from reference_sim import simulate_reference
+
+    n = int(round(duration * fs))
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(seed)
+    x = sosfiltfilt(butter(4, 5.0, fs=fs, output="sos"), rng.standard_normal(n))
+    x *= 10e-3 / x.std() * np.clip(t / 0.2, 0.0, 1.0)
+    xd = np.gradient(x, 1 / fs)
+    volt = reference_families.switching_voltage(n, fs, rng)
+    truth = dict(reference_families.SPENCER)
+    force = simulate_reference("spencer", truth, t, kind="device", displacement=x, velocity=xd, voltage=volt,
+                               command="zoh")["force"]
+    sd = noise * float(np.std(force))
+    channels = {"displacement": x, "velocity": xd, "force": force + sd * rng.standard_normal(n), "voltage": volt}
+    return make_record(t, channels, kind="device", source=f"held-spencer-{seed}", attrs={"noise_sd_force": sd}), truth

@@ -7,7 +7,8 @@ carrying what sensors give:
 * the *measured input* with 1–3 % white noise (of its RMS): the simulation was driven by the clean input,
   the file carries the noisy one (a device's displacement transducer, a table's accelerometer);
 * every output with coloured noise: AR(1) with ρ drawn in 0.3–0.8, its stationary SD 1–3 % of the channel's RMS;
-* the command (``voltage``) as commanded.
+* the command (``voltage``) as commanded: linear between samples in the simulation, or held from each sample
+  to the next as a DAC holds it (``Case.command_interp="zoh"``; read it with ``command_interp="hold"``).
 
 ``bm.load(path, mass=...)`` then reads it with no ``noise_sd_*`` attribute, so every noise floor the
 diagnosis uses is estimated. Every draw (input, noise levels, ρ) comes from the case's ``seed``.
@@ -89,7 +90,7 @@ class Case:
 
     @property
     def label(self) -> str:
-        return f"{self.name}-s{self.seed}"
+        return f"{self.name}-s{self.seed}" + ("-held" if self.command_interp == "zoh" else "")
 
 
 def hidden_case(effect: str, seed: int, duration: float = 10.0, fs: float = 500.0) -> Case:

@@ -246,6 +246,39 @@ def test_module_name_follows_the_physics(cache, tmp_path):
     assert any(f.endswith("kernel.py") for f in files) and any(f.endswith("drivers.py") for f in files)
 
 
+def test_generated_kernels_pass_the_command_hold_on():
+    """Every tier's wrapper is generated from the generic kernel's signature: it takes the ``hold`` flag (the
+    command held between samples) and hands it to the generic code, so no tier reads a held command as linear."""
+    from bayes_mr.inference.ukf import kernel as K
+
+    lay = get_model("spencer").layout("device")
+    for dispatcher in (run_batch, run_one, K.ukf_batch, K.ukf_run):
+        for layout, inline in ((lay, S.INLINE), (lay, ()), (None, S.INLINE)):
+            text = S._source(dispatcher, layout, inline)
+            signature, call = text.split(f"def {dispatcher.py_func.__name__}(")[1].split("return _generic(")
+            assert "hold" in signature and "hold" in call, text
+
+
+@pytest.mark.slow
+def test_specialised_and_inlined_kernels_hold_the_command(cache):
+    """spencer's device test under a switching command, held: the specialised and the inlined kernels give the
+    generic kernel's numbers, and those are not the linear reading's."""
+    m = get_model("spencer")
+    inp = device_inputs(0.01)
+    lay, cst = m.layout("device"), m.constants()
+    p = m.theta("device", {})
+    out = {}
+    for label, fn, hold in (("generic", run_one, True), ("linear", run_one, False),
+                            ("specialised", S.specialised(run_one, lay, ()), True),
+                            ("inlined", S.inlined(run_one), True)):
+        y = np.empty((inp.n, 2))
+        fn(lay, cst, p, inp.dt, inp.rows, y, np.zeros(inp.n - 1, np.int64), False, 1, hold)
+        out[label] = y
+    for label in ("specialised", "inlined"):
+        np.testing.assert_allclose(out[label], out["generic"], rtol=1e-12, atol=1e-12 * np.abs(out["generic"]).max())
+    assert np.abs(out["linear"] - out["generic"]).max() > 1e-3 * np.abs(out["generic"]).max()
+
+
 FORMS = ["normalized-bouc-wen", "dahl", "lugre", "bouc-wen", "spencer"]
 
 

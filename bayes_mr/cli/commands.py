@@ -62,9 +62,10 @@ def _read(path: str, args, *, what: str = "record"):
         columns=getattr(args, "columns", None),
         quality=not getattr(args, "no_quality", False), trim=getattr(args, "trim", False),
     )
-    interp = getattr(args, "input_interp", "auto")
-    if interp != "auto":  # the record attribute every simulation of it reads (bayes_mr.simulation.input_grid)
-        rec.attrs["input_interp"] = interp
+    for name in ("input_interp", "command_interp"):
+        value = getattr(args, name, "auto")
+        if value != "auto":  # the record attribute every simulation of it reads (bayes_mr.simulation.input_grid)
+            rec.attrs[name] = value
     return rec
 
 
@@ -123,10 +124,11 @@ def cmd_simulate(args) -> int:
     theta = model.theta(kind, params)
     outputs = tuple(c.strip() for c in args.outputs.split(",") if c.strip()) if args.outputs else None
     rec = synthesize(model, theta, time, inputs, mass=args.mass if kind != "device" else None,
-                     noise=args.noise, seed=args.seed, source=source, outputs=outputs, input_interp=args.input_interp)
+                     noise=args.noise, seed=args.seed, source=source, outputs=outputs, input_interp=args.input_interp,
+                     command_interp=args.command_interp)
     path = write_record(rec, args.output)
     print(f"wrote {path}: {kind} test, {rec.sizes['time']} samples at {rec.attrs['fs']:.6g} Hz, model {model.name}, "
-          f"input {rec.attrs['input_interp']}", file=sys.stderr)
+          f"input {rec.attrs['input_interp']}, command {rec.attrs['command_interp']}", file=sys.stderr)
     return 0
 
 

@@ -29,10 +29,15 @@ def _reading_flags(p: argparse.ArgumentParser) -> None:
 
 
 def _input_interp_flag(p: argparse.ArgumentParser) -> None:
+    """``--input-interp`` and ``--command-interp``: how the drive and the command read between samples."""
     p.add_argument("--input-interp", choices=("auto", "linear", "bandlimited"), default="auto",
                    help="the input between samples: linear, or the drive reconstructed band-limited (polyphase, "
-                        "S× finer grid; the command stays linear); auto (default): the record's input_interp "
+                        "S× finer grid; never the command); auto (default): the record's input_interp "
                         "attribute, else band-limited when the drive has content near the Nyquist rate")
+    p.add_argument("--command-interp", choices=("auto", "hold", "linear"), default="auto",
+                   help="the command (voltage/current) between samples: held from each sample to the next, as a "
+                        "DAC holds it (hold), or linear; auto (default): the record's command_interp attribute, "
+                        "else linear")
 
 
 def _job_flags(p: argparse.ArgumentParser, *, out: str | None, json: tuple[str, str]) -> None:

@@ -12,7 +12,7 @@ import xarray as xr
 
 from bayes_mr.data import units as _units
 from bayes_mr.data.checks import check_columns, check_overrides, one_line
-from bayes_mr.data.schema import MIN_SAMPLES, Where
+from bayes_mr.data.schema import COMMAND_INTERPS, MIN_SAMPLES, Where
 
 #: Attributes a record gets again from :func:`bayes_mr.data.schema.make_record`, not from the file.
 _REBUILT = ("kind", "fs", "dt", "source", "masked")
@@ -64,6 +64,10 @@ def read_netcdf(
     attrs = {k: v for k, v in ds.attrs.items() if k not in _REBUILT}
     if "mass" in attrs:
         attrs["mass"] = float(attrs["mass"])
+    held = attrs.get("command_interp")
+    if held is not None and held not in COMMAND_INTERPS:
+        raise Where(src).error(f"attribute command_interp={held!r} is not a reading of the command between samples",
+                               "set it to hold (held from sample to sample, as a DAC holds it) or linear, or drop it")
     attrs["_channel_attrs"] = {
         name: {k: v for k, v in ds[name].attrs.items() if k != "units"} for name in names
     }

@@ -53,6 +53,9 @@ UNITS: dict[str, str] = {
 
 #: Damper command channels: whichever a record has drives ``spencer`` and ``voltage_dependence``.
 COMMANDS = ("voltage", "current")
+#: Values of a record's ``command_interp`` attribute: the command linear between samples (the default), or held
+#: from each sample to the next, as a DAC holds it (:mod:`bayes_mr.simulation.input_grid`).
+COMMAND_INTERPS = ("linear", "hold")
 
 #: Columns a test of each kind must have (its input; a device test also its force).
 REQUIRED: dict[str, tuple[str, ...]] = {

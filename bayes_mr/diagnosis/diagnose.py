@@ -170,7 +170,8 @@ def diagnose(
     validation, validate = _validate(base, ext, validate, record)
     out = _report(record, base, ext, selected, rounds, validation, baselines)
     out.update(_unexplained(record, before, after, [c.name for c in selected]), seed=seed, threshold=search.threshold,
-               residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp)
+               residuals={"before": before.summary(), "after": after.summary()}, input_interp=base.lik.inputs.interp,
+               command_interp=base.lik.inputs.command_interp)
     out["terms"], term_fit = _search(record, ext, _asked(out) if terms is None else terms, validate, seed,
                                      search.threshold, say)
     out["wall_s"] = round(_time.perf_counter() - t0, 2)

@@ -32,11 +32,12 @@ __all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "val
 
 
 def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
-            input_interp: str = "auto") -> dict[str, np.ndarray]:
+            input_interp: str = "auto", command_interp: str = "auto") -> dict[str, np.ndarray]:
     """Simulated channels of ``model`` at parameters ``theta`` [SI] under ``record``'s inputs.
 
     Missing parameters (the form's fixed ones) take their defaults; the
-    input between samples is read as ``input_interp`` says (:class:`Inputs`).
+    input between samples is read as ``input_interp`` says, the command as
+    ``command_interp`` says (:class:`Inputs`; "auto": the record's attributes).
 
     Raises
     ------
@@ -44,7 +45,8 @@ def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
         The simulation diverged (names the sample).
     """
     model = get_model(model)
-    sim = simulate(model, Inputs.from_record(record, input_interp), model.theta(record.attrs["kind"], theta))
+    inputs = Inputs.from_record(record, input_interp, command_interp)
+    sim = simulate(model, inputs, model.theta(record.attrs["kind"], theta))
     if not sim.ok.all():
         raise ValueError(f"{model.name} diverged at sample {int(sim.failed[0])} of {record.attrs.get('source')}")
     return dict(sim.outputs)
@@ -76,6 +78,10 @@ class Identify:
     input_interp : {"auto", "linear", "bandlimited"}
         The input between samples (:mod:`bayes_mr.simulation.input_grid`): "auto" reads
         the record's ``input_interp`` attribute, else its drive's bandwidth.
+    command_interp : {"auto", "linear", "hold"}
+        The command between samples: "auto" reads the record's
+        ``command_interp`` attribute, else linear; "hold" for a command a DAC
+        held from sample to sample.
     """
 
     model: Model | str
@@ -84,11 +90,12 @@ class Identify:
     fixed: dict | None = None
     noise: str = "iid"
     input_interp: str = "auto"
+    command_interp: str = "auto"
 
     def likelihood(self, record: xr.Dataset) -> OutputError:
         """The binding of (model, record, noise model) every estimator consumes."""
         return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
-                           residual=self.noise, input_interp=self.input_interp)
+                           residual=self.noise, input_interp=self.input_interp, command_interp=self.command_interp)
 
     def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
         """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's."""
@@ -120,7 +127,7 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         scores of the point estimate's prediction over the scored samples
         (``mse`` over ``mse_channels``, ``rmse`` per measured channel [SI]),
         ``warmup_s`` and the new record's ``input_interp`` (its attribute,
-        else from its drive's bandwidth).
+        else from its drive's bandwidth) and ``command_interp`` (its attribute, else linear).
     """
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
@@ -129,14 +136,16 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         raise ValueError(f"warmup must be a non-negative number of seconds, got {warmup}")
     t0 = _time.perf_counter()
     # parameters held fixed in the fit are not in the point estimate; without them the defaults would be used
-    interp = Inputs.from_record(record).interp
-    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)}, interp)
+    inputs = Inputs.from_record(record)
+    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)},
+                   inputs.interp, inputs.command_interp)
     scores = score(_after(record, warmup), pred)
     out = summary.to_dict()
     out.update(
         mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)),
-        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0, input_interp=interp,
+        warmup_s=float(warmup), wall_s=_time.perf_counter() - t0, input_interp=inputs.interp,
+        command_interp=inputs.command_interp,
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )

@@ -229,7 +229,7 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, point)), rmse=scores["rmse"],
         noise_model=info.pop("noise_model"),
         extra={**info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
-               **describe_interp(lik.inputs.interp, post.engine)},
+               **describe_interp(lik.inputs.interp, post.engine, lik.inputs.command_interp)},
     )
     ll, ll_index = pointwise_log_likelihood(lik, post)
     return make_inference_data(summary, replace(post, draws=draws, point=point), names, units, record,

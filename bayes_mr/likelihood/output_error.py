@@ -228,6 +228,11 @@ class OutputError:
     input_interp : {"auto", "linear", "bandlimited"}
         The input between samples (:mod:`bayes_mr.simulation.input_grid`); "auto": the
         record's ``input_interp`` attribute, else from the drive's bandwidth.
+    command_interp : {"auto", "linear", "hold"}
+        The command between samples; "auto": the record's ``command_interp``
+        attribute, else linear. A choice other than the record's is written
+        into :attr:`record`'s attributes, so every later reading of it reads
+        the command the same way.
 
     Notes
     -----
@@ -247,9 +252,14 @@ class OutputError:
         scales: Scales | None = None,
         residual: str | ResidualModel = "iid",
         input_interp: str = "auto",
+        command_interp: str = "auto",
     ):
         if noise not in ("sampled", "fixed"):
             raise ValueError(f"noise must be 'sampled' or 'fixed', got {noise!r}")
+        self.inputs = Inputs.from_record(record, input_interp, command_interp)
+        if self.inputs.command_interp != record.attrs.get("command_interp", "linear"):
+            # a head race, a refit or the UKF's validation re-reads lik.record: it must read the command as here
+            record = record.assign_attrs(command_interp=self.inputs.command_interp)
         self.record = record
         self.kind = record.attrs["kind"]
         fixed = dict(fixed or {})
@@ -260,7 +270,6 @@ class OutputError:
         self.scales = scales or record_scales(record)
         self.par = Parameterisation.build(model, self.kind, self.scales, ranges=ranges, fixed=fixed)
         self.model = self.par.model
-        self.inputs = Inputs.from_record(record, input_interp)
         self.channels = outputs_of(record)
         y = np.column_stack([record[c].values for c in self.channels])
         self.valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(y.shape[0], bool)

@@ -39,7 +39,7 @@ def _write_out(lay, cst, p, a, s, f_r, f_d, out):
 
 
 @hot
-def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every):
+def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, end):
     ns = lay[L_NS]
     N = inputs.shape[0]
     for q in range(ns):
@@ -56,25 +56,36 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
             return k
         if k == N - 1:
             break
+        a1 = inputs[k + 1]
+        if hold:
+            # a command held between samples (a DAC's zero-order hold): the interval ends on row k's command,
+            # the drive columns stay linear; the next interval starts on row k + 1's
+            end[0] = a1[0]
+            end[1] = a1[1]
+            end[2] = inputs[k, 2]
+            a1 = end
         if use_schedule:  # a negative count replays an interval taken in that many ROS2 steps
             n_sub = abs(schedule[k])
             mode = ROS2 if schedule[k] < 0 else RK4
         else:
-            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], inputs[k + 1], h))
+            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], a1, h))
             n_sub = substeps(lay, cst, lam, h)
             mode = DECIDE
-        n_ros2 = advance(lay, cst, p, t, h, inputs[k], inputs[k + 1], s, k1, n_sub, mode, work)
+        n_ros2 = advance(lay, cst, p, t, h, inputs[k], a1, s, k1, n_sub, mode, work)
         if not use_schedule:
             schedule[k] = -n_ros2 if n_ros2 > 0 else n_sub
     return -1
 
 
 @driver
-def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
+def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1, hold=False):
     """Simulate one parameter set from rest over all input rows.
 
     Parameters
     ----------
+    inputs : ndarray, shape (N, 3)
+        Input rows (drive [m/s², N or m], device velocity [m/s], command [V or A]), linear between rows
+        (the command held instead with ``hold``).
     out : ndarray, shape ((N-1)//every + 1, n_out)
         Structure and forced: displacement, velocity, absolute acceleration, damper force.
         Device: force (total), damper force. Written at every ``every``-th
@@ -83,6 +94,9 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
     schedule : int64 ndarray, shape (N-1,)
         Sub-steps per interval: written when ``use_schedule`` is False, read
         when True (so perturbed parameter sets integrate on the same grid).
+    hold : bool
+        The command (column 2) held from each row to the next instead of
+        linear (:class:`bayes_mr.simulation.inputs.Inputs` ``command_interp="hold"``).
 
     Returns
     -------
@@ -96,15 +110,16 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1):
     # specialised structure step: dahl 31.8 -> 25.7 ns, lugre 41 -> 35; device tests at the packaged damper's
     # optima (56 walkers): bouc-wen 0.312 -> 0.286 s, spencer 0.243 -> 0.232, normalized-bouc-wen 0.191 ->
     # 0.187; spencer's structure step went 135 -> 152 ns. Same arithmetic, same numbers in every tier.
+    # a third row (width ≥ 3) holds an interval's end inputs when the command is held
     rows, width = work_shape(lay[L_NS])
-    work = np.zeros((rows + 2, width))
+    work = np.zeros((rows + 3, width))
     s = work[rows]
     k1 = work[rows + 1]
-    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every)
+    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, work[rows + 2])
 
 
 @driver(parallel=True, nogil=True)  # nogil: fits side by side on threads (executor.local_threads)
-def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed, every=1):
+def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed, every=1, hold=False):
     """Simulate each row of ``P`` (B, n_p) independently; see :func:`run_one`.
 
     ``out`` has shape (B, (N-1)//every + 1, n_out), ``schedules`` (B, N-1), ``failed`` (B,).
@@ -113,6 +128,6 @@ def run_batch(lay, cst, P, h, inputs, out, schedules, use_schedule, failed, ever
     B = P.shape[0]
     for b in prange(B):
         if use_schedule:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True, every)
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[0], True, every, hold)
         else:
-            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False, every)
+            failed[b] = run_one(lay, cst, P[b], h, inputs, out[b], schedules[b], False, every, hold)

@@ -67,6 +67,7 @@ def _info(rec: xr.Dataset, trim: dict, factor: int, budget: Budget) -> dict:
         "masked": int((~rec["valid"].values.astype(bool)).sum()),
         "trim": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in trim.items()},
         "decimation": factor, "fs": float(rec.attrs["fs"]), "samples": int(n), "input_interp": budget.input_interp,
+        "command_interp": str(rec.attrs.get("command_interp", "linear")),
         "duration_s": float(n / rec.attrs["fs"]),
         "noise_sd": {k[len("noise_sd_"):]: float(v) for k, v in rec.attrs.items() if k.startswith("noise_sd_")},
         "noise_floor": json.loads(rec.attrs.get("noise_floor", "{}")),

@@ -180,10 +180,11 @@ def compare(
 
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
+    inputs = Inputs.from_record(record)
     out = {"rows": rows, **choose(rows, models, force), "crosscheck": cross,
            "record": str(record.attrs.get("source", "")),
            "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
-           "input_interp": Inputs.from_record(record).interp}
+           "input_interp": inputs.interp, "command_interp": inputs.command_interp}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     return Comparison(out, fits)

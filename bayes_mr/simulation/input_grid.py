@@ -16,8 +16,14 @@ brings that error under :data:`TOLERANCE` at the record's bandwidth.
 
 The damper command column (voltage or current: a switching square wave) is
 never reconstructed band-limited — a sinc through a step rings (Gibbs) and
-would drive the damper with a voltage it never saw; it stays linear between
-the record's samples, as it was.
+would drive the damper with a voltage it never saw. Between the record's
+samples it is linear, or held (``command_interp="hold"``, attribute
+``command_interp``): a DAC holds each sample until the next (zero-order hold),
+and read linear such a command leads the one the damper saw by half a sample
+on average — a lag a fit then puts on the field's own dynamics. Held, sample
+k's command drives the whole interval [t_k, t_k+1) (on a fine grid, fine rows
+S·k … S·k+S−1), and the simulator ends each interval on the command it started
+with (:func:`bayes_mr.models.drivers.run_one`'s ``hold``).
 
 ``"auto"`` picks per record: a record that says how its input is to be read
 (attribute ``input_interp``, written by :func:`bayes_mr.simulation.simulate.synthesize`
@@ -31,9 +37,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from bayes_mr.data.schema import COMMAND_INTERPS
+
 #: The two reconstructions, and what a caller may ask for.
 INTERPS = ("linear", "bandlimited")
 CHOICES = ("auto",) + INTERPS
+#: What a caller may ask of the command between samples (:data:`COMMAND_INTERPS`, or "auto": the record's
+#: ``command_interp`` attribute, else linear).
+COMMAND_CHOICES = ("auto",) + COMMAND_INTERPS
 #: Share of the drive's spectral power (mean removed) below its bandwidth.
 POWER_SHARE = 0.99
 #: "auto" reconstructs band-limited when 1 − sinc²(f_bw·Δt) exceeds this (0.5 %: f_bw ≳ 0.039 fs).
@@ -50,20 +61,21 @@ KAISER_BETA = 9.0
 
 
 #: How the UKF reads the input (see :func:`describe`).
-UKF_NOTE = ("the filter propagates sample to sample with the input linear between samples; the point's "
-            "simulation and scores use input_interp")
+UKF_NOTE = ("the filter propagates sample to sample with the drive linear between samples and the command as "
+            "command_interp says; the point's simulation and scores use input_interp")
 
 
-def describe(interp: str, engine: str) -> dict:
-    """The JSON keys of a fit's input reconstruction: ``input_interp`` (and the UKF's own).
+def describe(interp: str, engine: str, command_interp: str = "linear") -> dict:
+    """The JSON keys of a fit's input reconstruction: ``input_interp``, ``command_interp`` (and the UKF's own).
 
-    The UKF stays on the record's grid with linear inputs (``filter_input_interp``):
+    The UKF stays on the record's grid with the drive linear (``filter_input_interp``):
     a band-limited predict would run the filter S times per sample (S up to
     32) for each of its training runs and put its state histories, reset
     marks and per-step process noise on a grid nothing else reads; its process
-    noise on x, ẋ already absorbs an input error between samples.
+    noise on x, ẋ already absorbs an input error between samples. A held
+    command costs nothing there, and the filter holds it.
     """
-    out = {"input_interp": interp}
+    out = {"input_interp": interp, "command_interp": command_interp}
     if engine == "ukf":
         out.update(filter_input_interp="linear", input_interp_note=UKF_NOTE)
     return out
@@ -140,6 +152,39 @@ def check(interp: str) -> str:
     return interp
 
 
+def command(declared: str | None, attribute: str | None = None, where: str = "record") -> str:
+    """How the command reads between samples: ``declared`` ("linear", "hold"), else the record's attribute.
+
+    Parameters
+    ----------
+    declared : str or None
+        A caller's choice; None or "auto" defers to ``attribute``.
+    attribute : str or None
+        The record's ``command_interp`` attribute (None: the record has none: linear).
+    where : str
+        The record's name, for the error.
+
+    Returns
+    -------
+    {"linear", "hold"}
+
+    Raises
+    ------
+    ValueError
+        An unknown value, naming where it came from and the valid ones.
+    """
+    if declared not in (None, "auto"):
+        if declared not in COMMAND_INTERPS:
+            raise ValueError(f"command interpolation {declared!r}: valid: {', '.join(COMMAND_CHOICES)}")
+        return declared
+    if attribute is None:
+        return "linear"
+    if attribute not in COMMAND_INTERPS:
+        raise ValueError(f"{where}: attribute command_interp={attribute!r}: valid: {', '.join(COMMAND_INTERPS)} "
+                         "(hold: the command was held between samples, as a DAC holds it); set one or drop it")
+    return str(attribute)
+
+
 def factor(rows: np.ndarray, kind: str, dt: float) -> int:
     """Upsampling factor S for a band-limited reconstruction of input rows (2 ≤ S ≤ :data:`S_MAX`).
 
@@ -154,7 +199,7 @@ def factor(rows: np.ndarray, kind: str, dt: float) -> int:
     return S_MAX
 
 
-def upsample(rows: np.ndarray, kind: str, s: int) -> np.ndarray:
+def upsample(rows: np.ndarray, kind: str, s: int, command_interp: str = "linear") -> np.ndarray:
     """Kernel input rows on the grid Δt/S: (S(N−1)+1, 3), fine row S·k equal to row k.
 
     Parameters
@@ -164,9 +209,13 @@ def upsample(rows: np.ndarray, kind: str, s: int) -> np.ndarray:
         velocity, command).
     kind : {"structure", "device", "forced"}
         Device tests reconstruct displacement and velocity, the others their
-        drive; the command column is interpolated linearly (see the module notes).
+        drive (see the module notes).
     s : int
         Upsampling factor.
+    command_interp : {"linear", "hold"}
+        The command column interpolated linearly, or held: fine rows S·k …
+        S·k+S−1 take row k's command (the simulator then holds it across each
+        fine interval too).
     """
     from scipy.signal import firwin, resample_poly
 
@@ -174,8 +223,10 @@ def upsample(rows: np.ndarray, kind: str, s: int) -> np.ndarray:
     n = rows.shape[0]
     m = s * (n - 1) + 1
     out = np.empty((m, rows.shape[1]))
-    t = np.arange(n) * float(s)
-    out[:, 2] = np.interp(np.arange(m), t, rows[:, 2])
+    if command_interp == "hold":
+        out[:, 2] = np.repeat(rows[:, 2], s)[:m]
+    else:
+        out[:, 2] = np.interp(np.arange(m), np.arange(n) * float(s), rows[:, 2])
     if s == 1:
         out[:, :2] = rows[:, :2]
         return out

@@ -3,7 +3,8 @@
 RK4 as in the thesis (3-9), on the record's own sample grid, with the input
 linear between samples — or, for an input with content near the Nyquist rate,
 on a grid S times finer with the drive reconstructed band-limited
-(:mod:`bayes_mr.simulation.input_grid`; ``Inputs.interp``). Each sample interval is split into as many RK4
+(:mod:`bayes_mr.simulation.input_grid`; ``Inputs.interp``); the command linear or
+held between samples (``Inputs.command_interp``). Each sample interval is split into as many RK4
 sub-steps as a local stability/accuracy bound asks for (h·λ ≤ c_acc, λ the
 fastest local rate of the model, see :func:`bayes_mr.models.kernel.rate`),
 so a stiff Dahl or Spencer law stays stable at a coarse sampling rate without
@@ -131,7 +132,8 @@ def simulate(
     else:
         schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
     run_batch_ = kernel(run_batch, lay, work=B * rows.shape[0])  # specialised when it pays (bayes_mr._compile.specialise)
-    run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S)
+    run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S,
+               inputs.hold)
     # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
     failed = np.where(failed >= 0, (failed + S - 1) // S, -1)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}
@@ -175,6 +177,7 @@ def synthesize(
     source: str = "simulate",
     outputs: tuple[str, ...] | None = None,
     input_interp: str = "linear",
+    command_interp: str = "linear",
 ) -> xr.Dataset:
     """A simulated test record in the package schema, with noise.
 
@@ -210,6 +213,9 @@ def synthesize(
     input_interp : {"linear", "bandlimited", "auto"}
         The input between samples (:mod:`bayes_mr.simulation.input_grid`), kept in the
         record's attributes so a fit reads the input as it was simulated.
+    command_interp : {"linear", "hold", "auto"}
+        The command between samples ("auto": linear), kept in the record's
+        ``command_interp`` attribute likewise.
 
     Returns
     -------
@@ -230,8 +236,10 @@ def synthesize(
     noisy = _noise_adder(noise, 1.0 / dt, np.random.default_rng(seq), band)
     attrs = {"noise_fraction": float(noise), "seed_entropy": str(seq.entropy), "model": model.name,
              "theta": ", ".join(f"{n}={v:.6g}" for n, v in zip(model.param_names(kind), theta))}
-    channels, sds, sim, interp = _measure(model, theta, kind, inputs, dt, mass, noisy, input_grid.check(input_interp))
-    attrs["input_interp"] = interp
+    held = input_grid.command(command_interp)
+    channels, sds, sim, interp = _measure(model, theta, kind, inputs, dt, mass, noisy, input_grid.check(input_interp),
+                                          held)
+    attrs.update(input_interp=interp, command_interp=held)
     if outputs is not None:
         channels, sds = _keep_outputs(kind, outputs, channels, sds, OUTPUTS[kind])
     attrs.update({f"noise_sd_{name}": sd for name, sd in sds.items()})
@@ -266,11 +274,12 @@ def _noise_adder(noise: float, fs: float, rng: np.random.Generator, band: float 
     return noisy
 
 
-def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy, interp: str):
+def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: float | None, noisy, interp: str,
+             held: str):
     """Simulate and 'measure' a test: the recorded channels, their noise SDs, the simulation and its input_interp.
 
     ``interp`` ("auto" resolved from the clean input's bandwidth) reads the
-    input between samples (:class:`Inputs`).
+    input between samples (:class:`Inputs`), ``held`` the command.
 
     The noise is drawn in a fixed order (structure: input, displacement,
     acceleration; forced: input, displacement, velocity, acceleration;
@@ -282,7 +291,8 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
         drive = DRIVE[kind]
         u = np.asarray(inputs[drive], float)
         felt, sd_u = noisy(u)  # the frame (mass) feels the input + w; the record keeps the input
-        rows = Inputs.structure(felt, dt, mass, volt) if kind == "structure" else Inputs.forced(felt, dt, volt, mass)
+        rows = (Inputs.structure(felt, dt, mass, volt, command_interp=held) if kind == "structure"
+                else Inputs.forced(felt, dt, volt, mass, command_interp=held))
         if interp == "auto":  # as a fit of the record will read it: from the recorded (clean) input
             interp = input_grid.choose(Inputs.forced(u, dt).rows, kind, dt)
         rows = rows.with_interp(interp)
@@ -296,7 +306,7 @@ def _measure(model: Model, theta, kind: str, inputs: dict, dt: float, mass: floa
     else:
         x = np.asarray(inputs["displacement"], float)
         v = np.asarray(inputs["velocity"], float)
-        rows = Inputs.device(x, v, dt, volt).with_interp(interp)
+        rows = Inputs.device(x, v, dt, volt, command_interp=held).with_interp(interp)
         interp = rows.interp
         sim = simulate(model, rows, theta)
         channels = {}

@@ -460,6 +460,16 @@ def test_round_trip_netcdf_keeps_mask_report_and_attrs(tmp_path):
     assert back["velocity"].attrs == ds["velocity"].attrs
 
 
+def test_netcdf_keeps_how_its_command_reads_and_refuses_an_unknown_reading(tmp_path):
+    """``command_interp`` (the command held between samples, or linear) travels in netCDF; another value stops the
+    load with one line naming the file and the attribute."""
+    ds = clean_record("random", "device", seed=8, duration=1.0, fs=1024.0)
+    assert load(write_record(ds.assign_attrs(command_interp="hold"), tmp_path / "h.nc")).attrs["command_interp"] == "hold"
+    write_record(ds.assign_attrs(command_interp="zoh"), tmp_path / "z.nc")
+    with pytest.raises(RecordError, match=r"z\.nc: attribute command_interp='zoh' .* hold .* linear"):
+        load(tmp_path / "z.nc")
+
+
 def test_round_trip_derived_velocity(tmp_path):
     ds = load(device_csv(tmp_path))
     back = load(write_record(ds, tmp_path / "d.nc"))

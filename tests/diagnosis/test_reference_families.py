@@ -5,14 +5,16 @@ kernel) with coloured output noise and noise on the measured input, written as a
 ``bm.load(path, mass=...)`` — no ``noise_sd_*`` attribute, so the noise floors are estimated, as on a
 user's record (``tests/reference_families.py``). Every hidden effect of the vocabulary's core, in a dahl
 baseline, must be named as the cause; clean records of three forms (a spencer device test with its
-command linear between samples among them, in the slow tier: diagnosing spencer takes ~15 min) must give
-``none``.
+command linear between samples among them, and one with its command held between samples and read held, in
+the slow tier: diagnosing spencer takes ~15 min) must give ``none``.
 
 Seeds 900–949 (default tier) and 950–999 (slow tier): disjoint from the calibration study's sets
 (``studies/diagnosis_calibration.py``: A 100–199, B 200–299). The default tier runs 8 s at 500 Hz (eight
 effects and three clean forms: about 3 min on two shared cores); the slow tier 30 s at 1 kHz, and the spencer
 device test.
 """
+
+import dataclasses
 
 import pytest
 
@@ -79,6 +81,19 @@ def test_clean_spencer_lab_file_gives_none(family_record):
     case = clean_case("spencer-device", 922, **DEFAULT)
     assert case.command and case.command_interp == "linear"
     _check_none(bm.diagnose(family_record(case), case.form, progress=False).to_dict())
+
+
+@pytest.mark.slow
+def test_clean_spencer_lab_file_with_a_held_command_gives_none(family_record):
+    """The same spencer device test with its command held from sample to sample, as a DAC holds it, read with the
+    command held (``--command-interp hold``): none. Read linear, its command leads the damper's by half a sample,
+    and that lag is what ``field_dynamics`` would be named for."""
+    case = dataclasses.replace(clean_case("spencer-device", 922, **DEFAULT), command_interp="zoh")
+    record = family_record(case)
+    record.attrs["command_interp"] = "hold"
+    out = bm.diagnose(record, case.form, progress=False).to_dict()
+    assert out["command_interp"] == "hold"
+    _check_none(out)
 
 
 @pytest.mark.slow

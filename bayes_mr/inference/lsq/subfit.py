@@ -81,7 +81,7 @@ class LinearSubfit:
         self.stride = stride or max(1, lik.inputs.n // 20000)
         self.valid = lik.valid
         self.target = f
-        self.inputs = Inputs.device(x, xd, lik.inputs.dt, v)
+        self.inputs = Inputs.device(x, xd, lik.inputs.dt, v, command_interp=lik.inputs.command_interp)
         self.frame = lik.kind == "structure" and not lik.model.form.frame_in_form
         self.x, self.xd = x, xd
         coords = lik.par.coords

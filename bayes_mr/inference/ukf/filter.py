@@ -212,6 +212,7 @@ def _kernel_args(problem: Problem, settings: UKFSettings):
         lay=lay, cst=cst, tmpl=problem.template, free_idx=problem.free_idx, is_log=coords.code,
         scale=coords.scale, phi_lo=phi_lo, phi_hi=phi_hi, h=problem.inputs.dt,
         inputs=problem.inputs.rows, yobs=np.ascontiguousarray(problem.yobs), valid=problem.valid,
+        hold=problem.inputs.hold,
         w0m=w0m, w0c=w0c, wi=wi, spread=pts.spread(L), ab=pts.beta - pts.alpha**2, central=pts.central,
     )
 
@@ -281,6 +282,7 @@ def run_priors(
     common = (
         args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
         args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
+        args["hold"],
     )
     weights = (args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"], args["central"], stride)
     work = R_ * problem.inputs.n * (2 * L + 1)  # sigma points propagated per sample
@@ -322,7 +324,7 @@ def filter_states(
     kernel(K.ukf_run, args["lay"])(
         args["lay"], args["cst"], args["tmpl"], args["free_idx"], args["is_log"], args["scale"],
         args["phi_lo"], args["phi_hi"], args["h"], args["inputs"], args["yobs"], args["valid"], reset,
-        m, P, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
+        args["hold"], m, P, Q, problem.R, args["w0m"], args["w0c"], args["wi"], args["spread"], args["ab"],
         args["central"], N + 1, hm, hs, states, True, info,
     )
     return dict(states=states, mean=m, cov=P, info=info)

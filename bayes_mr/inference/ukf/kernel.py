@@ -206,11 +206,12 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
 
     The arguments are tuples in the order :func:`ukf_run` builds them:
     ``model`` (lay, cst, free_idx, is_log, scale, phi_lo, phi_hi),
-    ``record`` (h, inputs, yobs, valid, reset), ``state`` (m, P, Q, R),
+    ``record`` (h, inputs, yobs, valid, reset, hold, end), ``state`` (m, P, Q, R),
     ``weights`` (w0m, w0c, wi, spread, ab, central), ``out`` (stride, hist_m,
     hist_sd, states_m, store_states, info); ``sig``, ``pbuf``, ``ubuf`` are
     the scratch arrays :func:`ukf_run` allocates for the sigma points, the
-    prediction and the update, and P0s the states' prior covariance.
+    prediction and the update, and P0s the states' prior covariance. ``end``
+    (3,) is scratch for an interval's end inputs when ``hold``.
 
     Per sample: sigma points about (m, P); propagate the model states of each;
     predicted moments + Q; sigma points redrawn about the prediction (so the
@@ -223,7 +224,7 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
     update) from sample k−1 to k. φ and its covariance carry over.
     """
     lay, _, _, _, _, phi_lo, phi_hi = model
-    h, inputs, yobs, valid, reset = record
+    h, inputs, yobs, valid, reset, hold, end = record
     m, P, Q, R = state
     stride, hist_m, hist_sd, states_m, store_states, info = out
     N = inputs.shape[0]
@@ -263,7 +264,13 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
         if reset[k + 1]:
             continue  # the next record starts from rest: nothing links k to k+1
         t = (k - k_seg) * h
-        code, jit, n_sub = _predict(model, weights, sig, pbuf, m, P, Q, h, inputs[k], inputs[k + 1], t)
+        a1 = inputs[k + 1]
+        if hold:  # the command held to the next sample, as the simulator's drivers hold it (drive linear)
+            end[0] = a1[0]
+            end[1] = a1[1]
+            end[2] = inputs[k, 2]
+            a1 = end
+        code, jit, n_sub = _predict(model, weights, sig, pbuf, m, P, Q, h, inputs[k], a1, t)
         n_jitter += jit
         if n_sub > max_nsub:
             max_nsub = n_sub
@@ -310,7 +317,7 @@ def _ukf_loop(model, record, state, weights, out, sig, pbuf, ubuf, P0s):
 @driver(nogil=True)
 def ukf_run(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, reset, m, P, Q, R,
+    h, inputs, yobs, valid, reset, hold, m, P, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, hist_m, hist_sd, states_m, store_states, info,
 ):
@@ -342,6 +349,9 @@ def ukf_run(
         2n_s + p, entries (2L+1 sigma points, O(L³) per step) and the records
         need not be the same length. The innovation log-likelihood summed
         over both records is ln p(y_A) + ln p(y_B | y_A) = ln p(y_A, y_B).
+    hold : bool
+        The command (inputs' column 2) held from each sample to the next
+        instead of linear, in the prediction (the update reads the sample's own row).
     m, P : (L,), (L, L) prior mean/covariance on entry, posterior on exit.
     Q, R : (L, L), (ny, ny) additive process and measurement noise per step.
     w0m, w0c, wi, spread, ab : sigma-point weights, √(L+λ), β − α².
@@ -384,7 +394,7 @@ def ukf_run(
     P0s = P[:ns, :ns].copy()  # the states' prior covariance, restored at every reset
     _ukf_loop(
         (lay, cst, free_idx, is_log, scale, phi_lo, phi_hi),  # tmpl is in TH's fixed columns already
-        (h, inputs, yobs, valid, reset),
+        (h, inputs, yobs, valid, reset, hold, np.zeros(3)),
         (m, P, Q, R),
         (w0m, w0c, wi, spread, ab, central),
         (stride, hist_m, hist_sd, states_m, store_states, info),
@@ -398,7 +408,7 @@ def ukf_run(
 @driver(parallel=True, nogil=True)
 def ukf_batch(
     lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-    h, inputs, yobs, valid, reset, M, PP, Q, R,
+    h, inputs, yobs, valid, reset, hold, M, PP, Q, R,
     w0m, w0c, wi, spread, ab, central,
     stride, HM, HS, INFO,
 ):
@@ -408,7 +418,7 @@ def ukf_batch(
     for r in prange(n_runs):
         ukf_run(
             lay, cst, tmpl, free_idx, is_log, scale, phi_lo, phi_hi,
-            h, inputs, yobs, valid, reset, M[r], PP[r], Q, R,
+            h, inputs, yobs, valid, reset, hold, M[r], PP[r], Q, R,
             w0m, w0c, wi, spread, ab, central,
             stride, HM[r], HS[r], dummy, False, INFO[r],
         )

@@ -130,6 +130,10 @@ def concat_records(records: list[xr.Dataset] | tuple[xr.Dataset, ...]) -> tuple[
                              "resample one (bayes_mr.data.derive.resample) so both share the sample interval")
         if kind == "structure" and not math.isclose(float(r.attrs["mass"]), float(first.attrs["mass"]), rel_tol=1e-12):
             raise ValueError(f"{src}: storey mass {r.attrs['mass']} kg differs from {first.attrs['mass']} kg")
+        held = [str(x.attrs.get("command_interp", "linear")) for x in (first, r)]
+        if held[0] != held[1]:  # one filter run reads one command: the joined record keeps the first's attribute
+            raise ValueError(f"{src}: its command is read {held[1]} between samples, the first record's {held[0]} "
+                             "— set both records' command_interp attribute alike")
     names = [v for v in first.data_vars if all(v in r for r in records) and first[v].dims == ("time",)]
     sizes = [r.sizes["time"] for r in records]
     n = sum(sizes)
