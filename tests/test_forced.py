@@ -281,3 +281,17 @@ def test_boucwen_benchmark_held_out_period_after_training_on_the_first_four():
     idata = Identify("bouc-wen", LeastSquares()).fit(rec.isel(time=slice(0, 4 * period)), progress=False)
     v = validate(idata, rec, warmup=4 * period * float(rec.attrs["dt"]))
     assert v["rmse"]["displacement"] < 1e-5  # the measured output's own noise is ~7.3e-6 m RMS
+
+
+def test_the_linear_subfit_reads_a_current_command():
+    """A device record commanded in current gives the convex sub-fit its command (not zeros), as a voltage does."""
+    from bayes_mr.inference.lsq.subfit import LinearSubfit
+
+    m = get_model("spencer")
+    t = TIME
+    x = 0.01 * np.sin(2 * np.pi * 2.0 * t)
+    current = 0.5 + 0.4 * (t > 1.0)
+    rec = synthesize(m, m.theta("device", {}), t, {"displacement": x, "velocity": np.gradient(x, t),
+                                                   "current": current}, noise=0.01, seed=11)
+    sub = LinearSubfit(OutputError("spencer", rec))
+    np.testing.assert_array_equal(sub.inputs.rows[:, 2], current)

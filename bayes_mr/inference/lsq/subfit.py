@@ -53,10 +53,10 @@ def linear_names(lik: OutputError) -> tuple[str, ...]:
 
 
 def _motion(lik: OutputError) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Measured x, ẋ, voltage and the force target of the sub-fit."""
+    """Measured x, ẋ, command (voltage or current, whichever the record has) and the force target of the sub-fit."""
     rec = lik.record
     x = rec["displacement"].values
-    v = rec["voltage"].values if "voltage" in rec else np.zeros_like(x)
+    v = lik.inputs.rows[:, 2]  # the command column Inputs.from_record filled from either channel
     if lik.kind == "device":
         return x, rec["velocity"].values, v, rec["force"].values
     from bayes_mr.data.derive import smooth_velocity
