@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from bayes_mr.inference.mcmc.budget import cap_message
 from bayes_mr.selection.comparison import row_of as _row
 from bayes_mr.report.markdown import fmt
 
@@ -162,7 +163,7 @@ def _stop_reason(row: dict, machine_limit: str | None = None) -> str:
     least: τ estimated from a chain shorter than 50 τ is biased low (emcee's own caution), and on the packaged
     damper it kept growing with the chain (convergence.projection), so the projection is a floor, not a
     near miss. A chain the wall-time cap stopped says so as a machine limit (``machine_limit``: the main job's
-    sentence for it, :func:`bayes_mr.run.posteriors.cap_message`), never as a result of its work budget."""
+    sentence for it, :func:`bayes_mr.inference.mcmc.budget.cap_message`), never as a result of its work budget."""
     p = row.get("projection")
     stopped = row.get("stopped")
     if stopped == "projected" and p:
@@ -173,9 +174,7 @@ def _stop_reason(row: dict, machine_limit: str | None = None) -> str:
     if stopped == "max_evaluations":
         return f"its work budget ran out ({row.get('evaluations')} log-density evaluations)"
     if stopped == "max_seconds":
-        cap = row.get("wall_cap_s")
-        return machine_limit or (f"stopped by the wall-time cap of {cap:.0f} s: a machine limit, not a result"
-                                 if cap is not None else "stopped by the wall-time cap: a machine limit, not a result")
+        return machine_limit or cap_message(row.get("wall_cap_s"))
     if stopped == "q_tails" and row.get("pareto_k") is not None:
         return (f"met the rule, but its proposals' importance weights have a Pareto k̂ of {fmt(row['pareto_k'], 2)}: "
                 f"the fitted proposal underweights part of the posterior, so τ and R-hat do not bound its error")

@@ -41,7 +41,7 @@ from bayes_mr.selection.fit_jobs import (
     FIT_ERRORS, error_row, free_parameters, least_squares, lsq_mcmc_job, row_message, unit_results,
 )
 from bayes_mr.inference.identify import Emcee, LeastSquares
-from bayes_mr.inference.mcmc.budget import over_budget
+from bayes_mr.inference.mcmc.budget import cap_message, over_budget, seconds_text
 from bayes_mr.inference.mcmc.settings import MCMCSettings
 
 if TYPE_CHECKING:
@@ -147,21 +147,10 @@ def pool_spent(pool: float, work: dict[str, dict]) -> str:
     return f"the posteriors' pool of {pool:.3g} integrator steps is spent ({spent[2:] or 'nothing yet'}): not run"
 
 
-def _seconds(s: float) -> str:
-    """Seconds as the report writes them: whole ones, two figures below ten (a test's cap of 0.001 s)."""
-    return f"{s:.0f}" if s >= 10 else f"{s:.2g}"
-
-
-def cap_message(cap_s: float, pool_cap_s: float | None = None) -> str:
-    """What a posterior the wall-time cap stopped says: a machine limit, not a work-budget outcome."""
-    share = "" if pool_cap_s is None else f" (what the posteriors' {_seconds(pool_cap_s)} s cap left it)"
-    return f"stopped by the wall-time cap of {_seconds(cap_s)} s{share}: a machine limit, not a result"
-
-
 def cap_spent(pool_cap_s: float, work: dict[str, dict]) -> str:
     """Why a posterior was not started: the posteriors' wall-time cap is spent (the forms that spent it)."""
-    spent = ", ".join(f"{m} {_seconds(w['wall_s'])} s" for m, w in work.items())
-    return (f"not run: the posteriors' wall-time cap of {_seconds(pool_cap_s)} s is spent "
+    spent = ", ".join(f"{m} {seconds_text(w['wall_s'])} s" for m, w in work.items())
+    return (f"not run: the posteriors' wall-time cap of {seconds_text(pool_cap_s)} s is spent "
             f"({spent or 'nothing yet'}): a machine limit, not a result")
 
 

@@ -66,3 +66,16 @@ def check_budget(n_walkers: int, pilot_steps: int, max_evaluations: int, chain_w
             f"chain has met the rule in ({MIN_CHAIN_STEPS} × {chain_walkers} walkers) need {pilot + chain} "
             f"log-density evaluations, more than the {max_evaluations} its work budget leaves it: not run")
     return pilot + chain
+
+
+def seconds_text(s: float) -> str:
+    """Seconds as the reports write them: whole ones, two figures below ten (a test's cap of 0.001 s)."""
+    return f"{s:.0f}" if s >= 10 else f"{s:.2g}"
+
+
+def cap_message(cap_s: float | None, pool_cap_s: float | None = None) -> str:
+    """What a chain the wall-time cap stopped says: a machine limit, not a work-budget outcome (``cap_s`` the cap it
+    ran under, None if unknown; ``pool_cap_s`` the cap of the posteriors it shared, if any)."""
+    of = "" if cap_s is None else f" of {seconds_text(cap_s)} s"
+    share = "" if pool_cap_s is None else f" (what the posteriors' {seconds_text(pool_cap_s)} s cap left it)"
+    return f"stopped by the wall-time cap{of}{share}: a machine limit, not a result"
