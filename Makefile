@@ -18,11 +18,14 @@ run: $(STAMP)
 	$(BIN)/bayes-mr run --out results
 	$(BIN)/python scripts/update_readme.py run --out results
 
+# one pytest worker per core, at most 4 (on an empty kernel cache each worker compiles what its tests need); worksteal
+# hands a worker that runs out of tests another's, so one long test does not keep the rest waiting
+PYTEST_WORKERS ?= -n auto --maxprocesses=4 --dist worksteal
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(PYTEST_WORKERS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -m slow
+	$(BIN)/python -m pytest $(PYTEST_WORKERS) -m slow
 
 # on a quiet machine; BENCH_FLAGS="--boucwen --compare" adds the Bouc–Wen benchmark fit and the compare timing
 BENCH_FLAGS ?=
