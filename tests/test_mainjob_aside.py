@@ -62,6 +62,12 @@ def test_a_stage_that_raises_in_the_child_raises_here_with_its_name():
         _collect([Stage("boom", _raise)])
 
 
+#: The quick job made smaller (short chains, no term search): what is compared is where the stages run, not
+#: how much they compute.
+SMALL = replace(QUICK, forms=("dahl", "lugre"), duration_s=3.0, terms=False,
+                mcmc=replace(QUICK.mcmc, max_steps=200))
+
+
 def _without_times(d):
     """``d`` without wall times and paths (what may differ between two runs of the same computation)."""
     if isinstance(d, dict):
@@ -73,7 +79,7 @@ def _without_times(d):
 
 
 def test_the_main_job_beside_the_posteriors_gives_the_in_process_numbers(tmp_path):
-    budget = replace(QUICK, forms=("dahl", "lugre"), duration_s=3.0)
+    budget = SMALL
     assert not budget.aside  # off in make run (module docstring)
     here = run(tmp_path / "here", budget=budget, progress=False)
     beside = run(tmp_path / "beside", budget=replace(budget, aside=True), progress=False)
@@ -101,7 +107,7 @@ def test_without_the_child_the_stages_are_planned_for_the_final_selection(tmp_pa
 
     monkeypatch.setattr(mainjob, "with_posteriors", switched)
     monkeypatch.setattr(mainjob, "diagnose_selected", spied)
-    budget = replace(QUICK, forms=("dahl", "lugre"), duration_s=3.0, shake_table_engines=())
+    budget = replace(SMALL, shake_table_engines=())
     out = run(tmp_path, budget=budget, progress=False, stages=("compare", "diagnose"))
     assert out["selected"] != firsts[0]
     assert diagnosed == [out["selected"]] and out["selected"] in out["diagnose"]
