@@ -103,3 +103,21 @@ def test_models_without_sensitivities_keep_finite_differences():
     assert not Residuals(lik, lik.noise_sd).exact
     with pytest.raises(ValueError, match="no exact sensitivities"):
         force_sensitivities("dahl", device_inputs(0.008), get_model("dahl").theta("device", {}), np.ones(1499, int))
+
+
+def test_tally_counts_runs_and_their_sub_steps():
+    """simulate.tally notes each call: members, replays, sensitivity runs, sub-steps and the cap's share."""
+    from bayes_mr.simulation.simulate import tally
+
+    model = get_model("spencer")
+    inputs = _inputs("linear", "linear", n=400)
+    theta = model.theta("device", {})
+    with tally() as calls:
+        sim = simulate(model, inputs, np.vstack([theta, theta]), n_max=3)
+        simulate(model, inputs, theta, schedule=sim.schedule[0])
+        force_sensitivities(model, inputs, theta, sim.schedule[0])
+    simulate(model, inputs, theta)  # outside the block: not noted
+    assert [(c["members"], c["replayed"], c["sensitivities"]) for c in calls] == [
+        (2, False, False), (1, True, False), (1, True, True)]
+    assert calls[0]["at_cap"] == np.count_nonzero(sim.schedule >= 3) > 0
+    assert calls[0]["substeps"] == sim.schedule.sum() and calls[1]["substeps"] == calls[1]["at_cap"] == 0
