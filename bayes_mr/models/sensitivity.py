@@ -20,8 +20,13 @@ free parameters and the base). Two things halved it from 3.0: the power |z|ⁿ c
 shared by the rates (:func:`~bayes_mr.models.kernel.deriv_pow`) and the partials, and the coefficients'
 columns written out instead of a loop with a branch per coefficient.
 
-Covered: the ``spencer`` form in a device test, alone or with ``force_offset``
-(:func:`bayes_mr.simulation.sensitivity.covered` says which models; the others keep finite differences).
+Covered: the ``spencer`` form in a device test, with any of the effects whose partials
+:func:`spencer_partials` has (``force_offset``, ``stiffness_drift``, ``asymmetry``, ``command_saturation``,
+``field_decay``, ``cubic_stiffness``, ``shear_thinning``, ``stribeck_friction``; ``inertia`` and
+``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`).
+:func:`bayes_mr.simulation.sensitivity.covered` says which models; the others (the effects with discrete
+updates between sub-steps, ``field_dynamics`` and ``small_amplitude_regime``, the library terms, the other
+forms) keep finite differences.
 Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``) the derivative is that of the side the state is on, which
 is what a finite difference of a step that does not cross it sees.
 """
@@ -33,7 +38,9 @@ import math
 import numpy as np
 
 from bayes_mr._compile.jit import driver, hot
-from bayes_mr.models.kernel import L_F0, L_NS, L_PFORM, L_SFORM, deriv_pow
+from bayes_mr.models.kernel import (
+    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST, deriv_pow,
+)
 
 
 @hot(inline="always")
@@ -46,26 +53,91 @@ def _sgn(v):
 
 
 @hot(inline="always")
-def _coefficient_column(jp, fp, i, o, j, d, g_r, c1):
-    """Column of spencer's coefficient j = 0..6 (alpha_a, alpha_b, c0a, c0b, k0, c1a, c1b), given d = ∂ẏ/∂θ_j:
-    ẏ's, ż's through r = ẋ − ẏ, and f_r's through c1 ẏ (called once per coefficient with its d written out,
-    not from a loop over j with a branch per coefficient)."""
-    jp[i, o + j] = d
-    jp[i + 1, o + j] = -g_r * d
-    fp[o + j] = c1 * d
+def _column(jp, fp, i, j, d, g_r, c1):
+    """Column j of a parameter that enters through ẏ only, given d = ∂ẏ/∂θ_j: ẏ's, ż's through r = ẋ − ẏ,
+    and f_r's through c1 ẏ (called once per parameter with its d written out, not from a loop with a branch
+    per parameter)."""
+    jp[i, j] = d
+    jp[i + 1, j] = -g_r * d
+    fp[j] = c1 * d
+
+
+@hot(inline="always")
+def _saturation(lay, p, u):
+    """(u_e, ∂u_e/∂u, ∂u_e/∂u_s): the command the coefficients see (u_s tanh(u/u_s) with command_saturation,
+    else u; :func:`bayes_mr.models.kernel._saturate`) and its derivatives."""
+    if lay[L_CSAT] < 0:
+        return u, 1.0, 0.0
+    us = p[lay[L_CSAT]]
+    q = u / us
+    th = math.tanh(q)
+    return us * th, 1.0 - th * th, th - q * (1.0 - th * th)
+
+
+@hot(inline="always")
+def _fluid_partials(lay, cst, p, xd, fp):
+    """∂f_r/∂θ of the velocity-only forces (kernel._fluid_friction): shear_thinning's c_p, m_hb, v_p and
+    stribeck_friction's F_st, v_s."""
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        cp, mh, vp = p[j], p[j + 1], p[j + 2]
+        q = abs(xd) / vp
+        pw = math.pow(1.0 + q, mh)
+        sg = _sgn(xd)
+        fp[j] = vp * sg * (pw - 1.0) / mh
+        fp[j + 1] = cp * vp * sg * (pw * math.log(1.0 + q) / mh - (pw - 1.0) / (mh * mh))
+        fp[j + 2] = cp * sg * ((pw - 1.0) / mh - pw / (1.0 + q) * q)
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        r = xd / p[j + 1]
+        rr = r * r
+        if rr < 700.0:
+            e = math.exp(-rr)
+            th = math.tanh(r / cst[K_SMOOTH])
+            fp[j] = e * th
+            dfdr = p[j] * e * (-2.0 * r * th + (1.0 - th * th) / cst[K_SMOOTH])
+            fp[j + 1] = -dfdr * r / p[j + 1]
+
+
+@hot(inline="always")
+def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d, g_r,
+                     c1, c1b, yd, jp, fp, i):
+    """The effects' columns (:data:`bayes_mr.simulation.sensitivity.COVERED_EFFECTS` of the kernel's):
+    stiffness_drift, asymmetry, command_saturation, field_decay, force_offset, cubic_stiffness and the fluid
+    forces. ``force`` is k1 x − F_pre (what the drift scales besides α), ``bracket`` ∂ẏ/∂u_e."""
+    if lay[L_DRIFT] >= 0:
+        j = lay[L_DRIFT]
+        _column(jp, fp, i, j, alpha0 * t * z * a_z * inv_d, g_r, c1)
+        fp[j] += t * force
+    if lay[L_ASYM] >= 0:
+        _column(jp, fp, i, lay[L_ASYM], alpha0 * m_s * z * sz * inv_d, g_r, c1)
+    if lay[L_CSAT] >= 0:
+        j = lay[L_CSAT]
+        _, _, due = _saturation(lay, p, us)
+        _column(jp, fp, i, j, bracket * due, g_r, c1)
+        fp[j] += c1b * due * yd
+    if lay[L_FDEC] >= 0:
+        jp[i + 2, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
+    if lay[L_F0] >= 0:
+        fp[lay[L_F0]] = 1.0
+    if lay[L_K3] >= 0:
+        fp[lay[L_K3]] = x * x * x
+    _fluid_partials(lay, cst, p, xd, fp)
 
 
 @hot
-def spencer_partials(lay, p, a, s, js, jp, fs, fp, zn):
-    """Partial derivatives of spencer's device-test rates and force at inputs ``a`` and state ``s``.
+def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
+    """Partial derivatives of spencer's device-test rates and force at time ``t``, inputs ``a`` and state ``s``.
 
     Writes J_s = ∂ṡ/∂s into ``js`` (ns, ns), J_θ = ∂ṡ/∂θ into ``jp`` (ns, n_θ), ∂f_r/∂s into ``fs`` (ns)
     and ∂f_r/∂θ into ``fp`` (n_θ); only the entries that can be nonzero (the caller zeroes the arrays once).
     ``zn`` is |z|ⁿ, computed once per stage by the caller and shared with
     :func:`~bayes_mr.models.kernel.deriv_pow` (the power is most of a stage's cost).
-    The law (:func:`bayes_mr.models.kernel.deriv`): ẏ = (α z + c0 ẋ + k0 (x − y))/(c0 + c1), r = ẋ − ẏ,
-    ż = −γ|r| sgn(z)|z|ⁿ − β r |z|ⁿ + A r, u̇ = η (v − u), f_r = c1 ẏ + k1 x − F_pre (+ f0), with α, c0,
-    c1 linear in u. d(sgn(z)|z|ⁿ)/dz = n|z|ⁿ⁻¹, finite at z = 0 for n ≥ 1 (the form's range).
+    The law (:func:`bayes_mr.models.kernel.deriv`): ẏ = (α a_z z + c0 ẋ + k0 (x − y))/(c0 + c1), r = ẋ − ẏ,
+    ż = −γ|r| sgn(z)|z|ⁿ − β r |z|ⁿ + A r, u̇ = ρ η (v − u), f_r = c1 ẏ + m_k (k1 x − F_pre) + f0 + k3 x³ +
+    the fluid forces, with α = m_s (α_a + α_b u_e), c0, c1 linear in u_e (the saturated command), m_s = m_k
+    = 1 + drift·t, a_z = 1 + asym·sgn z, ρ = r_d while the field falls (field_decay), else 1.
+    d(sgn(z)|z|ⁿ)/dz = n|z|ⁿ⁻¹, finite at z = 0 for n ≥ 1 (the form's range).
     """
     o = lay[L_PFORM]
     i = lay[L_SFORM]
@@ -73,45 +145,52 @@ def spencer_partials(lay, p, a, s, js, jp, fs, fp, zn):
     y, z, us = s[i], s[i + 1], s[i + 2]
     ab, c0b, k0, c1b = p[o + 1], p[o + 3], p[o + 4], p[o + 6]
     gam, bet, A, n, eta = p[o + 9], p[o + 10], p[o + 11], p[o + 12], p[o + 13]
-    alpha = p[o] + ab * us
-    c0 = p[o + 2] + c0b * us
-    c1 = p[o + 5] + c1b * us
+    m_s = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
+    sz = _sgn(z)
+    a_z = 1.0 + p[lay[L_ASYM]] * sz if lay[L_ASYM] >= 0 else 1.0
+    ue, due, _ = _saturation(lay, p, us)
+    alpha0 = p[o] + ab * ue
+    alpha = alpha0 * m_s
+    c0 = p[o + 2] + c0b * ue
+    c1 = p[o + 5] + c1b * ue
     inv_d = 1.0 / (c0 + c1)
-    yd = (alpha * z + c0 * xd + k0 * (x - y)) * inv_d
+    yd = (alpha * z * a_z + c0 * xd + k0 * (x - y)) * inv_d
     r = xd - yd
     az = abs(z)
     if az > 0.0:
         zn1 = zn / az  # |z|ⁿ⁻¹ without a second pow
     else:
         zn1 = 1.0 if n == 1.0 else 0.0
-    sz = _sgn(z)
     g_r = -gam * _sgn(r) * sz * zn - bet * zn + A  # ∂ż/∂r
     g_z = -n * zn1 * (gam * abs(r) + bet * r * sz)  # ∂ż/∂z at fixed r
+    bracket = (ab * m_s * z * a_z + c0b * xd - yd * (c0b + c1b)) * inv_d  # ∂ẏ/∂u_e
     d_y = -k0 * inv_d  # ∂ẏ/∂y, ∂ẏ/∂z, ∂ẏ/∂u
-    d_z = alpha * inv_d
-    d_u = (ab * z + c0b * xd - yd * (c0b + c1b)) * inv_d
+    d_z = alpha * a_z * inv_d
+    d_u = bracket * due
+    rho = p[lay[L_FDEC]] if lay[L_FDEC] >= 0 and abs(v) < abs(us) else 1.0
     js[i, i], js[i, i + 1], js[i, i + 2] = d_y, d_z, d_u
     js[i + 1, i], js[i + 1, i + 1], js[i + 1, i + 2] = -g_r * d_y, g_z - g_r * d_z, -g_r * d_u
-    js[i + 2, i + 2] = -eta
-    fs[i], fs[i + 1], fs[i + 2] = c1 * d_y, c1 * d_z, c1 * d_u + c1b * yd
-    _coefficient_column(jp, fp, i, o, 0, z * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 1, us * z * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 2, r * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 3, us * r * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 4, (x - y) * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 5, -yd * inv_d, g_r, c1)
-    _coefficient_column(jp, fp, i, o, 6, -us * yd * inv_d, g_r, c1)
+    js[i + 2, i + 2] = -rho * eta
+    fs[i], fs[i + 1], fs[i + 2] = c1 * d_y, c1 * d_z, c1 * d_u + c1b * due * yd
+    w = m_s * z * a_z * inv_d
+    _column(jp, fp, i, o, w, g_r, c1)
+    _column(jp, fp, i, o + 1, ue * w, g_r, c1)
+    _column(jp, fp, i, o + 2, r * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 3, ue * r * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 4, (x - y) * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 5, -yd * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 6, -ue * yd * inv_d, g_r, c1)
     fp[o + 5] += yd  # f_r's own c1 ẏ
-    fp[o + 6] += us * yd
-    fp[o + 7] = x
-    fp[o + 8] = -1.0
+    fp[o + 6] += ue * yd
+    fp[o + 7] = m_s * x  # m_k = m_s: the drift scales both
+    fp[o + 8] = -m_s
     jp[i + 1, o + 9] = -abs(r) * sz * zn
     jp[i + 1, o + 10] = -r * zn
     jp[i + 1, o + 11] = r
     jp[i + 1, o + 12] = -(gam * abs(r) * sz + bet * r) * zn * math.log(az) if az > 0.0 else 0.0
-    jp[i + 2, o + 13] = v - us
-    if lay[L_F0] >= 0:
-        fp[lay[L_F0]] = 1.0
+    jp[i + 2, o + 13] = rho * (v - us)
+    _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, p[o + 7] * x - p[o + 8], bracket,
+                     inv_d, g_r, c1, c1b, yd, jp, fp, i)
 
 
 @hot(inline="always")
@@ -157,7 +236,7 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
                     T[q, jj] = S[q, jj] if st == 0 else S[q, jj] + c * hs * K[st - 1, q, jj]
             zn = math.pow(abs(tmp[iz]), p[ip])
             deriv_pow(lay, cst, p, tj + c * hs, am, tmp, k[st], zn)
-            spencer_partials(lay, p, am, tmp, js, jp, fs, fp, zn)
+            spencer_partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
             _stage(js, jp, T, K[st], ns, n_th)
         for q in range(ns):
             s[q] += hs6 * (k[0, q] + 2.0 * k[1, q] + 2.0 * k[2, q] + k[3, q])
@@ -212,7 +291,7 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
         t = row * h
         zn = math.pow(abs(s[lay[L_SFORM] + 1]), p[lay[L_PFORM] + 12])
         f_r, f_d = deriv_pow(lay, cst, p, t, inputs[row], s, k[0], zn)
-        spencer_partials(lay, p, inputs[row], s, js, jp, fs, fp, zn)
+        spencer_partials(lay, cst, p, t, inputs[row], s, js, jp, fs, fp, zn)
         if row % every == 0:
             _write(out, dout, row // every, f_r, f_d, fs, fp, S, ns, n_th)
         if not math.isfinite(f_r):

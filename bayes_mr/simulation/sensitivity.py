@@ -16,10 +16,13 @@ import numpy as np
 from bayes_mr.models import Model, get_model
 from bayes_mr.models.sensitivity import run_sensitivities
 from bayes_mr.simulation.inputs import Inputs
-from bayes_mr.simulation.simulate import note
+from bayes_mr.simulation.simulate import delay, note
 
-#: Effects whose partial derivatives the sensitivity kernel has (besides the form's own).
-COVERED_EFFECTS = frozenset({"force_offset"})
+#: Effects whose partial derivatives the sensitivity kernel has (besides the form's own), and the two applied
+#: to the kernel's force here, as :func:`~bayes_mr.simulation.simulate.simulate` applies them (``inertia``,
+#: ``sensor_delay``).
+COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "command_saturation", "field_decay",
+                             "cubic_stiffness", "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
 #: Forms, by kind of test, whose partial derivatives it has.
 COVERED_FORMS = {"device": frozenset({"spencer"})}
 
@@ -74,4 +77,26 @@ def force_sensitivities(model: Model | str, inputs: Inputs, theta: np.ndarray,
                                dout, sched, S, inputs.hold)
     note(1, True, sched[None, :], 0, perf_counter() - t0, sensitivities=True)
     failed = int((failed + S - 1) // S) if failed >= 0 else -1
-    return out[:, 0], dout, failed
+    force = out[:, 0]
+    names = model.param_names(kind)
+    if model.effect("inertia"):  # f += m_e ẍ (simulate), before the delay as there
+        j = names.index("m_e")
+        force = force + theta[j] * inputs.acceleration
+        dout[:, j] = inputs.acceleration
+    if model.delay_channel(kind) is not None:
+        force, dout = _delayed(force, dout, theta[names.index("delay")], inputs.dt, names.index("delay"))
+    return force, dout, failed
+
+
+def _delayed(force: np.ndarray, dforce: np.ndarray, tau: float, dt: float, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """The force lagged by τ [s] as :func:`~bayes_mr.simulation.simulate.delay` lags it (linear interpolation,
+    held at the first sample before it), its sensitivities lagged likewise, and ∂/∂τ: minus the slope of the
+    interpolant at t − τ (0 where the first sample is held; a sample's own time takes the slope after it)."""
+    n = force.size
+    lagged = delay(np.vstack([force, dforce.T]), np.full(dforce.shape[1] + 1, tau), dt)
+    q = (np.arange(n) * dt - tau) / dt
+    k = np.clip(np.floor(q).astype(int), 0, n - 2)
+    slope = np.where(q >= 0.0, (force[k + 1] - force[k]) / dt, 0.0)
+    dforce = lagged[1:].T.copy()
+    dforce[:, j] = -slope
+    return lagged[0], dforce

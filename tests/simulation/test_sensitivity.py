@@ -1,7 +1,7 @@
 """Exact sensitivities (bayes_mr.models.sensitivity) against central differences on the same schedule.
 
-Every covered case (spencer in a device test, alone and with force_offset; the command linear and held, and the
-drive band-limited) must give the simulator's own force bit for bit and each column of ∂f/∂θ within 1e-6
+Every covered case (spencer in a device test, alone and with each covered effect and several together; the
+command linear and held, and the drive band-limited) must give the simulator's own force bit for bit and each column of ∂f/∂θ within 1e-6
 (relative, column norm) of central differences of the simulator on the replayed schedule; and least squares'
 Jacobian in φ built from them must agree with its finite-difference one likewise.
 """
@@ -26,6 +26,17 @@ CASES = [
     ("spencer", {}, "hold", "linear"),
     ("spencer+force_offset", {"f0": -40.0}, "linear", "linear"),
     ("spencer+force_offset", {"f0": 25.0}, "hold", "bandlimited"),
+    ("spencer+stiffness_drift", {"drift": 0.2}, "linear", "linear"),
+    ("spencer+asymmetry", {"asym": 0.25}, "linear", "linear"),
+    ("spencer+command_saturation", {"u_s": 1.5}, "linear", "linear"),
+    ("spencer+field_decay", {"r_d": 0.4}, "hold", "linear"),
+    ("spencer+cubic_stiffness", {"k3": 1e8}, "linear", "linear"),
+    ("spencer+shear_thinning", {}, "linear", "linear"),
+    ("spencer+stribeck_friction", {}, "linear", "linear"),
+    ("spencer+inertia", {"m_e": 2.0}, "linear", "linear"),
+    ("spencer+sensor_delay", {"delay": 0.0023}, "linear", "linear"),
+    ("spencer+stiffness_drift+asymmetry+command_saturation+force_offset", {"drift": -0.1, "asym": 0.1, "u_s": 1.2,
+                                                                           "f0": 10.0}, "hold", "linear"),
 ]
 
 
@@ -97,7 +108,8 @@ def test_least_squares_jacobian_is_exact(name, values):
 def test_models_without_sensitivities_keep_finite_differences():
     """A form or effect the kernel has no partials of is not covered: its Jacobian stays finite differences."""
     assert covered("spencer", "device") and covered("spencer+force_offset", "device")
-    for name, kind in (("dahl", "device"), ("spencer+stiffness_drift", "device"), ("spencer", "structure")):
+    for name, kind in (("dahl", "device"), ("spencer+field_dynamics", "device"), ("spencer", "structure"),
+                       ("spencer+small_amplitude_regime", "device"), ("spencer+term(xdot*abs(x))", "device")):
         assert not covered(name, kind)
     lik = OutputError("dahl+force_offset", _record("dahl+force_offset", {"f0": 5.0}))
     assert not Residuals(lik, lik.noise_sd).exact
