@@ -47,6 +47,7 @@ class Residuals:
         self.options = {} if cap is None else {"n_max": int(cap)}
         self.cap = cap
         self.last = None  # (φ, residual) of the last evaluation that simulated: the Jacobian's base point
+        self.at = None  # φ of the last evaluation (its schedule is ``schedule``), accepted or not
         self.exact = exact and self.has_exact(lik)
 
     @staticmethod
@@ -59,6 +60,7 @@ class Residuals:
     def __call__(self, phi):
         yhat, sim = self.lik.predict(phi, **self.options)
         self.schedule = sim.schedule[0]
+        self.at = np.array(phi, float)
         r = standardised(self.lik, yhat[0], self.sd)
         self.last = None
         if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
@@ -104,13 +106,12 @@ class Residuals:
 
     def _sensitivity_jacobian(self, phi):
         """−(∂ŷ/∂φ)/σ over the valid samples from one run with sensitivities, on φ's own schedule; zeros where
-        φ's simulation diverged (as the differences give), None where the schedule holds a ROS2 interval
-        (the sensitivities follow RK4 only: the caller takes finite differences)."""
+        φ's simulation diverged (as the differences give; a point only rejected as too stiff for the search
+        keeps its slope, as there), None where the schedule holds a ROS2 interval (the sensitivities follow
+        RK4 only: the caller takes finite differences)."""
         phi = np.asarray(phi, float)
-        if self.last is None or not np.array_equal(self.last[0], phi):
-            self(phi)  # the schedule (and divergence) at φ itself
-        if self.last is None:
-            return np.zeros((self.lik.n_valid * len(self.lik.channels), phi.size))
+        if self.at is None or not np.array_equal(self.at, phi):
+            self(phi)  # the schedule at φ itself
         if np.any(self.schedule < 1):
             return None
         lik = self.lik
