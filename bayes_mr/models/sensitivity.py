@@ -14,11 +14,15 @@ Nørsett & Wanner, *Solving ODEs I*, §I.14), so S is the derivative of what the
 rounding, and the output's is ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s. The states themselves are advanced by the
 same operations as :func:`bayes_mr.models.integrate.advance` (same numbers, bit for bit).
 
-Cost: a run with the 14 sensitivities of spencer costs 1.7 simulations of the generic kernel on a 4 s random
-device test at 1 kHz (18.7 RK4 sub-steps per interval), against 14 for a forward-difference Jacobian (13
-free parameters and the base). Two things halved it from 3.0: the power |z|ⁿ computed once per stage and
-shared by the rates (:func:`~bayes_mr.models.kernel.deriv_pow`) and the partials, and the coefficients'
-columns written out instead of a loop with a branch per coefficient.
+Cost, in CPU time on one thread (a 4 s random device test at 1 kHz, published parameters, 18.7 RK4 sub-steps
+per interval): a run with spencer's 14 sensitivities takes 3.4 simulations of the generic kernel, against 13
+for a forward-difference Jacobian (one per free parameter; the base is the step's own residual). Per stage,
+about a third is the rates, a third the partials, a third the products J_s T (ns × ns × n_θ). What brought it
+there: the power |z|ⁿ computed once per stage and shared by the rates and the partials, the coefficients'
+columns written out instead of a loop with a branch per coefficient, and the rates and partials inlined
+(:data:`deriv_pow`). The run is one thread where the finite differences' batch runs on all cores, so on an
+idle two-core machine a single refinement's Jacobian gains less than its CPU time says; fits side by side
+(a search's starts, diagnose's candidates) and a busy machine gain all of it.
 
 Covered: the ``spencer`` form in a device test, with any of the effects whose partials
 :func:`spencer_partials` has (``force_offset``, ``stiffness_drift``, ``asymmetry``, ``command_saturation``,
@@ -38,9 +42,16 @@ import math
 import numpy as np
 
 from bayes_mr._compile.jit import driver, hot
+from bayes_mr.models import kernel
 from bayes_mr.models.kernel import (
-    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST, deriv_pow,
+    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST,
 )
+
+#: :func:`bayes_mr.models.kernel.deriv_pow` inlined into this module's loops at numba-IR level, as the simulator's
+#: inlined and specialised kernels inline it (:data:`bayes_mr._compile.specialise.INLINE`): with the partials
+#: inlined too, the run's CPU time went from 4.6 to 3.4 simulations of the generic kernel; ~30 s more compile,
+#: once per machine (numba's disk cache).
+deriv_pow = hot(inline="always")(kernel.deriv_pow.py_func)
 
 
 @hot(inline="always")
@@ -125,7 +136,7 @@ def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s,
     _fluid_partials(lay, cst, p, xd, fp)
 
 
-@hot
+@hot(inline="always")
 def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     """Partial derivatives of spencer's device-test rates and force at time ``t``, inputs ``a`` and state ``s``.
 
