@@ -273,7 +273,9 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
 
     Parameters
     ----------
-    lay, cst, p : the model's layout, constants and full parameter vector [SI] (:func:`~bayes_mr.models.drivers.run_one`).
+    lay, cst, p : ndarray
+        The model's layout, constants and full parameter vector [SI] (as for
+        :func:`~bayes_mr.models.drivers.run_one`).
     h : float
         Simulation step [s] (the sample interval over the input's upsampling).
     inputs : ndarray, shape (N, 3)

@@ -1,9 +1,9 @@
 """Exact sensitivities (bayes_mr.models.sensitivity) against central differences on the same schedule.
 
 Every covered case (spencer in a device test, alone and with each covered effect and several together; the
-command linear and held, and the drive band-limited) must give the simulator's own force bit for bit and each column of ∂f/∂θ within 1e-6
-(relative, column norm) of central differences of the simulator on the replayed schedule; and least squares'
-Jacobian in φ built from them must agree with its finite-difference one likewise.
+command linear and held, and the drive band-limited) must give the simulator's own force bit for bit and each
+column of ∂f/∂θ within 1e-6 (relative, column norm) of central differences of the simulator on the replayed
+schedule; and least squares' Jacobian in φ built from them must agree with its finite-difference one likewise.
 """
 
 from __future__ import annotations
