@@ -139,6 +139,27 @@ def _kernel_rows(r: dict) -> list[tuple[str, str]]:
     return rows
 
 
+def _spencer_rows(r: dict) -> list[tuple[str, str]]:
+    """Rows of ``bench --spencer`` (absent from bench files written without it)."""
+    if "spencer_lsq_s" not in r:
+        return []
+    rows = []
+    for key in ("spencer", "spencer_sine"):
+        ex, fd = r[f"{key}_lsq"], r[f"{key}_lsq_fd"]
+        rows.append((f"least squares, spencer, {r['spencer_records'][key]}: exact Jacobians ({ex['sensitivity_runs']} "
+                     f"sensitivity runs, {ex['sims']} simulations) against finite differences ({fd['sims']} + "
+                     f"{fd['sims_replayed']} simulations); {100 * fd['share_at_cap']:.1f} % of intervals at the "
+                     f"sub-step cap, {fd['substeps_per_interval']:.1f} sub-steps per interval",
+                     f"{r[f'{key}_lsq_s']:.0f} s against {r[f'{key}_lsq_fd_s']:.0f} s "
+                     f"({r[f'{key}_lsq_speedup']:.1f}×)"))
+        d = r[f"{key}_diagnose"]
+        rows.append((f"diagnose, spencer baseline, {r['spencer_records'][key]}: cause named {d['cause']}",
+                     f"{r[f'{key}_diagnose_s']:.0f} s"))
+    rows.append((f"compare, five forms × lsq, {r['spencer_records']['spencer_sine']} (selected "
+                 f"{r['spencer_compare']['selected']})", f"{r['spencer_compare_s']:.0f} s"))
+    return rows
+
+
 def bench_section(r: dict) -> str:
     """The table of a benchmark run.
 
@@ -179,6 +200,7 @@ def bench_section(r: dict) -> str:
                  (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, τ_max "
                   f"{r['boucwen_mcmc_tau_max']:.0f}, R-hat_max {r['boucwen_mcmc_rhat_max']:.3f}, mean within "
                   f"{r['boucwen_mcmc_max_z']:.2g} sd ({verdict})", f"{r['boucwen_mcmc_s']:.0f} s")]
+    rows += _spencer_rows(r)
     if "compare_s" in r:
         where = f"{r['compare_workers']} workers" if r["compare_workers"] else "in process"
         rows.append((f"compare, {r['compare_record']}, TI evidence ({where}; selected {r['compare_selected']})",

@@ -160,7 +160,7 @@ def test_the_bench_fixture_has_every_key_the_bench_writes():
     """The fixture follows run_bench (its keys as the benchmark's sources write them)."""
     source = "".join(p.read_text() for p in (ROOT / "bayes_mr" / "bench").glob("*.py"))
     written = set(re.findall(r'"((?:(?:ukf|filterpy|train|lsq|mcmc|diagnose|boucwen|compare|simulate|kernel|'
-                             r'inlined|max_state|compile)_[a-z_0-9]+)|speedup|threads)":', source))
+                             r'inlined|max_state|compile|spencer)_[a-z_0-9]+)|speedup|threads)":', source))
     keys = set(json.loads(FIXTURE_BENCH.read_text()))
     assert len(written) > 30 and written <= keys, written - keys
 

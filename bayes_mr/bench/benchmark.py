@@ -366,12 +366,15 @@ def compare_timing(seed: int = 0, duration: float = 30.0, fs: float = 1000.0, wo
             "compare_record": f"dahl, {duration:g} s at {fs:g} Hz; {', '.join(COMPARE_FORMS)} × lsq, mcmc, ukf"}
 
 
-def run_bench(seed: int = 0, progress=print, boucwen: bool = False, compare: bool = False) -> dict:
+def run_bench(seed: int = 0, progress=print, boucwen: bool = False, compare: bool = False,
+              spencer: bool = False) -> dict:
     """All benchmark figures (the ``bench`` keys of docs/CONTRACT.md and a few more).
 
     ``boucwen``: also :func:`boucwen_benchmark_timing` (``bayes-mr bench --boucwen``) — the Bouc–Wen
     benchmark record's fit takes longer than the rest of the bench together, so ``make bench`` leaves it out.
     ``compare``: also :func:`compare_timing` (``bayes-mr bench --compare``; tens of minutes, also left out).
+    ``spencer``: also :func:`bayes_mr.bench.spencer.spencer_bench` (``bayes-mr bench --spencer``: spencer least
+    squares, diagnose and a five-form compare on device tests; tens of minutes).
     """
     out = {}
     progress("UKF per step, ours vs filterpy …")
@@ -390,4 +393,9 @@ def run_bench(seed: int = 0, progress=print, boucwen: bool = False, compare: boo
     if compare:
         progress("compare, three forms × lsq, mcmc, ukf on a 30 s record at 1 kHz …")
         out.update(compare_timing(seed=seed))
+    if spencer:
+        from bayes_mr.bench.spencer import spencer_bench
+
+        progress("spencer on device tests (lsq, diagnose, compare) …")
+        out.update(spencer_bench(seed=seed, progress=progress))
     return out

@@ -308,7 +308,8 @@ def cmd_bench(args) -> int:
     from bayes_mr.bench.benchmark import run_bench
 
     say = progress_say(on_terminal(True))
-    result = run_bench(seed=args.seed, progress=say, boucwen=args.boucwen, compare=args.compare)
+    result = run_bench(seed=args.seed, progress=say, boucwen=args.boucwen, compare=args.compare,
+                       spencer=args.spencer)
     _write_json(result, args.json)
     return 0
 

@@ -229,6 +229,11 @@ def _job_parsers(sub) -> None:
     p.add_argument("--compare", action="store_true",
                    help="also time compare of dahl, normalized-bouc-wen and lugre × lsq, mcmc, ukf on a 30 s, "
                         "1 kHz structure test, TI evidence (compare_s; long: not part of make bench)")
+    p.add_argument("--spencer", action="store_true",
+                   help="also time spencer least squares (exact Jacobians and finite differences), diagnose and "
+                        "a five-form compare × lsq on simulated device tests: 20 s at 1 kHz under random motion "
+                        "and a switching command, and a 4 s, 5 mm / 3 Hz sine test (spencer_*; long: not part of "
+                        "make bench)")
     _no_readme_flag(p)
 
 

@@ -22,7 +22,9 @@ differences then see the model, not the step control.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
+from time import perf_counter
 
 import numpy as np
 import xarray as xr
@@ -40,6 +42,43 @@ OUTPUT_NAMES = {
     "device": ("force", "damper_force"),
     "forced": ("displacement", "velocity", "acceleration", "force"),
 }
+#: Where :func:`simulate` notes each call while :func:`tally` is open (None: nowhere, the usual case).
+_TALLY: list | None = None
+
+
+@contextmanager
+def tally():
+    """Note every :func:`simulate` call made inside the block: how many, and how stiff.
+
+    Yields a list that receives one dict per call: ``members`` (parameter sets simulated), ``replayed``
+    (a schedule was replayed: a finite-difference Jacobian's perturbed sets), ``sensitivities`` (a run with
+    the forward sensitivities, :mod:`bayes_mr.simulation.sensitivity`, on a replayed schedule), ``intervals`` (sample
+    intervals per member), ``at_cap`` (intervals, over the members that chose their own sub-steps, that
+    hit ``n_max``), ``substeps`` (RK4 sub-steps plus ROS2 steps, over those members), ``cap`` and
+    ``wall_s``. The benchmark reads it to say where a fit's time goes (:mod:`bayes_mr.bench.spencer`).
+    Not thread-local: calls of every thread are noted.
+    """
+    global _TALLY
+    before, _TALLY = _TALLY, []
+    try:
+        yield _TALLY
+    finally:
+        _TALLY = before
+
+
+def note(members: int, replayed: bool, schedules: np.ndarray, n_max: int, wall_s: float,
+         sensitivities: bool = False) -> None:
+    """One simulation call into the open :func:`tally` (nothing when none is open); ``sensitivities``: a run
+    with the forward sensitivities (:mod:`bayes_mr.simulation.sensitivity`)."""
+    if _TALLY is None:
+        return
+    own = schedules[:0] if replayed else schedules
+    _TALLY.append({"members": int(members), "replayed": bool(replayed), "sensitivities": bool(sensitivities),
+                   "intervals": int(schedules.shape[1]),
+                   "at_cap": int(np.count_nonzero(own >= n_max)), "substeps": int(np.abs(own).sum()),
+                   "cap": int(n_max), "wall_s": float(wall_s)})
+
+
 @dataclass(frozen=True)
 class Simulation:
     """Result of :func:`simulate`.
@@ -132,8 +171,10 @@ def simulate(
     else:
         schedules = np.zeros((B, max(rows.shape[0] - 1, 1)), dtype=np.int64)
     run_batch_ = kernel(run_batch, lay, work=B * rows.shape[0])  # specialised when it pays (bayes_mr._compile.specialise)
+    t0 = perf_counter()
     run_batch_(lay, cst, np.ascontiguousarray(P), inputs.dt / S, rows, out, schedules, replay, failed, S,
                inputs.hold)
+    note(B, replay, schedules, n_max, perf_counter() - t0)
     # the first sample whose output is NaN (a fine-grid row between samples fails the next sample)
     failed = np.where(failed >= 0, (failed + S - 1) // S, -1)
     outputs = {name: out[:, :, j] for j, name in enumerate(names)}

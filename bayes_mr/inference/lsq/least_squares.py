@@ -23,8 +23,9 @@
    are far faster than the sampling resolves; simulating it with the kernel's 400 sub-steps costs 30–90 s per
    evaluation on the Bouc–Wen benchmark). Only the final refinement simulates with the full sub-step range.
 3. **Laplace approximation** at the optimum: Cov(φ) = (JᵀJ)⁻¹ with J the
-   Jacobian of the σ̂-standardised residuals (central differences on a
-   replayed sub-step schedule). Residuals of a dynamic model are
+   Jacobian of the σ̂-standardised residuals (exact from the forward
+   sensitivities where the model has them, else central differences on a
+   replayed sub-step schedule; :class:`~bayes_mr.inference.lsq.refine.Residuals`). Residuals of a dynamic model are
    autocorrelated (process noise, model error), and (JᵀJ)⁻¹ then understates
    the uncertainty many times over; the reported covariance is the
    heteroskedasticity-and-autocorrelation-consistent sandwich
@@ -103,6 +104,10 @@ class LSQSettings:
     input_noise_replicas : int
         Replicas of the response to the input's noise in the covariance's
         middle (:mod:`.calibrate`); 0 keeps the HAC/GLS covariance alone.
+    exact_jacobian : bool
+        Jacobians from the forward sensitivities where the model has them
+        (:class:`~bayes_mr.inference.lsq.refine.Residuals`: one run instead of
+        p + 1, and exact); False: finite differences everywhere.
     """
 
     n_candidates: int = 48
@@ -113,6 +118,7 @@ class LSQSettings:
     head_samples: int | None = 8192
     search_substeps: int | None = 32
     input_noise_replicas: int = calibrate.N_DRAWS
+    exact_jacobian: bool = True
 
 
 @dataclass
@@ -216,17 +222,18 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
         # the starts race on the head (an eighth of the evaluations each, then the better half twice as many, …)
         head = _head(lik, settings.head_samples)
         runs = _search(head, settings, say, max(settings.max_nfev // 8, 1), race=True)
-        phi = refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev).x
+        phi = refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev,
+                     exact=settings.exact_jacobian).x
         say(f"best start (raced on the first {settings.head_samples} samples) refined on all {n}")
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
         yhat, _ = lik.predict(phi)
         sd = _ml_sd(lik, yhat[0])
-        res = refine(lik, phi, sd, settings.max_nfev)
+        res = refine(lik, phi, sd, settings.max_nfev, exact=settings.exact_jacobian)
         phi = res.x
     return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
-                   replicas=settings.input_noise_replicas)
+                   replicas=settings.input_noise_replicas, exact=settings.exact_jacobian)
 
 
 def _head(lik: OutputError, n: int) -> OutputError:
@@ -252,7 +259,8 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
             for i, phi0 in enumerate(starts)]
     alive, budget = list(runs), max_nfev
     while alive:  # the starts side by side (independent refinements: the same numbers as in turn)
-        done = side_by_side(refine, [(lik, run["phi"], lik.noise_sd.copy(), budget, cap) for run in alive])
+        done = side_by_side(refine, [(lik, run["phi"], lik.noise_sd.copy(), budget, cap, None, settings.exact_jacobian)
+                                     for run in alive])
         for run, res in zip(alive, done):
             run.update(phi=res.x, cost=float(res.cost), nfev=run["nfev"] + int(res.nfev), status=int(res.status),
                        message=str(res.message))
@@ -304,8 +312,11 @@ def posterior_log_volume(JtJ: np.ndarray, widths: np.ndarray) -> float:
 
 
 def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0.0,
-            replicas: int = calibrate.N_DRAWS) -> LSQResult:
+            replicas: int = calibrate.N_DRAWS, exact: bool = True) -> LSQResult:
     """Laplace covariance and evidence of ``lik`` at φ (an optimum); GLS under the AR model.
+
+    J is exact where the model has sensitivities (``exact``, :class:`~bayes_mr.inference.lsq.refine.Residuals`),
+    else central differences.
 
     When the record's input carries noise, the covariance's middle is the
     larger (direction by direction) of the HAC/GLS one and that of ``replicas``
@@ -320,7 +331,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
         lik.choose_residual_orders(phi)
     # sampled: σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
     sigma = _ml_sd(lik, yhat[0]) if sampled else np.asarray(lik.noise_sd, float)
-    rf = Residuals(lik, sigma)
+    rf = Residuals(lik, sigma, exact=exact)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
     JtJ = J.T @ J

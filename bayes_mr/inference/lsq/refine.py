@@ -1,10 +1,13 @@
 """Output-error least squares' inner loop: the standardised residual vector, its Jacobian and one refinement.
 
 :class:`Residuals` is the residual vector r(φ) = (y − ŷ(φ))/σ over the valid
-samples (prewhitened under an AR residual model) and its forward-difference
-Jacobian, the perturbed simulations replaying the base point's sub-step
-schedule (one grid, so the differences see the parameters and not the step
-control). :func:`refine` runs scipy's bounded trust-region least squares on
+samples (prewhitened under an AR residual model) and its Jacobian, on the base
+point's sub-step schedule (one grid, so the derivatives see the parameters and
+not the step control): exact, from the forward sensitivities integrated beside
+the states in one run (:mod:`bayes_mr.simulation.sensitivity`), where the model
+has them and the residual is not prewhitened (profiled AR coefficients make the
+whitened residual nonlinear in ŷ); else by finite differences, the perturbed
+simulations replaying that schedule. :func:`refine` runs scipy's bounded trust-region least squares on
 it from one start; :mod:`bayes_mr.inference.lsq.least_squares` (the search, Laplace,
 evidence) and :mod:`bayes_mr.diagnosis.diagnose` (candidate refits) call it.
 """
@@ -18,6 +21,7 @@ from scipy import optimize
 
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.inference.lsq.subfit import stiff
+from bayes_mr.simulation import sensitivity
 
 
 def standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
@@ -28,23 +32,35 @@ def standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarr
 
 
 class Residuals:
-    """Standardised (under AR: prewhitened) residual vector and its finite-difference Jacobian.
+    """Standardised (under AR: prewhitened) residual vector and its Jacobian (module docstring).
 
     ``cap``: most sub-steps per sample interval (the search's cost cap); a
-    simulation saturating it too often counts as a diverged one.
+    simulation saturating it too often counts as a diverged one. ``exact``:
+    use the forward sensitivities where :meth:`has_exact` (False: finite
+    differences always, the reference they are tested against).
     """
 
-    def __init__(self, lik: OutputError, sd: np.ndarray, cap: int | None = None):
+    def __init__(self, lik: OutputError, sd: np.ndarray, cap: int | None = None, exact: bool = True):
         self.lik = lik
         self.sd = np.asarray(sd, float)
         self.schedule = None
         self.options = {} if cap is None else {"n_max": int(cap)}
         self.cap = cap
         self.last = None  # (φ, residual) of the last evaluation that simulated: the Jacobian's base point
+        self.at = None  # φ of the last evaluation (its schedule is ``schedule``), accepted or not
+        self.exact = exact and self.has_exact(lik)
+
+    @staticmethod
+    def has_exact(lik: OutputError) -> bool:
+        """Whether ``lik``'s Jacobian comes from sensitivities: a covered model, the force as the one channel,
+        and residuals that are not prewhitened (iid, or AR before its orders are chosen)."""
+        return (lik.kind == "device" and lik.channels == ("force",) and sensitivity.covered(lik.model, lik.kind)
+                and (lik.residual.kind == "iid" or not lik.residual.resolved))
 
     def __call__(self, phi):
         yhat, sim = self.lik.predict(phi, **self.options)
         self.schedule = sim.schedule[0]
+        self.at = np.array(phi, float)
         r = standardised(self.lik, yhat[0], self.sd)
         self.last = None
         if not sim.ok[0] or not np.all(np.isfinite(r)) or stiff(sim.schedule[:1], self.cap)[0]:
@@ -55,6 +71,12 @@ class Residuals:
         return r.ravel()
 
     def jacobian(self, phi, central: bool = False):
+        """∂r/∂φ (n_valid·C, p) at φ: exact where :attr:`exact` (``central`` is then moot), else forward
+        (``central``: central) differences of step 1e-6·max(1, |φ_j|)."""
+        if self.exact:
+            J = self._sensitivity_jacobian(phi)
+            if J is not None:
+                return J
         p = phi.size
         h = 1e-6 * np.maximum(1.0, np.abs(phi))
         # trust-region asks for J(φ) right after r(φ): the base point is not simulated again (same numbers)
@@ -81,6 +103,23 @@ class Residuals:
             else:
                 J[:, j] = (r[1 + j] - r[0]) / h[j]
         return J
+
+    def _sensitivity_jacobian(self, phi):
+        """−(∂ŷ/∂φ)/σ over the valid samples from one run with sensitivities, on φ's own schedule; zeros where
+        φ's simulation diverged (as the differences give; a point only rejected as too stiff for the search
+        keeps its slope, as there), None where the schedule holds a ROS2 interval (the sensitivities follow
+        RK4 only: the caller takes finite differences)."""
+        phi = np.asarray(phi, float)
+        if self.at is None or not np.array_equal(self.at, phi):
+            self(phi)  # the schedule at φ itself
+        if np.any(self.schedule < 1):
+            return None
+        lik = self.lik
+        _, dforce, failed = sensitivity.force_sensitivities(lik.model, lik.inputs, lik.par.full(phi), self.schedule)
+        dy = dforce[:, lik.par.free_idx] * lik.par.coords.dtheta_dphi(phi)
+        if failed >= 0 or not np.all(np.isfinite(dy)):
+            return np.zeros((lik.n_valid, phi.size))
+        return -(dy if lik.valid.all() else dy[lik.valid]) / self.sd[0]
 
 
 #: Relative cost tolerance of the trust-region refinement: it stops after an accepted step that lowers
@@ -127,7 +166,7 @@ class Stall:
 
 
 def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
-           cap: int | None = None, stall: Stall | None = None) -> optimize.OptimizeResult:
+           cap: int | None = None, stall: Stall | None = None, exact: bool = True) -> optimize.OptimizeResult:
     """Bounded trust-region least squares (scipy's ``trf``, ``x_scale="jac"``) of :class:`Residuals` from φ₀.
 
     Parameters
@@ -143,13 +182,15 @@ def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
         Most sub-steps per sample interval (:class:`Residuals`).
     stall : Stall, optional
         Stop early on a crawl (:class:`Stall`); None: only scipy's tolerances and ``max_nfev`` stop it.
+    exact : bool
+        Exact Jacobians where the model has sensitivities (:class:`Residuals`); False: finite differences.
 
     Returns
     -------
     scipy.optimize.OptimizeResult
         ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (:data:`STALLED`: stopped by ``stall``).
     """
-    res_fn = Residuals(lik, sd, cap)
+    res_fn = Residuals(lik, sd, cap, exact)
     lo, hi = lik.phi_lo, lik.phi_hi
     x0 = np.clip(phi0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     return optimize.least_squares(

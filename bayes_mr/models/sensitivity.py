@@ -1,0 +1,322 @@
+"""Forward sensitivities of a simulation: the force and its derivatives ∂f_r/∂θ in one compiled pass.
+
+A least-squares step needs the Jacobian of the simulated outputs with respect to the parameters. Finite
+differences cost p + 1 simulations (14 for ``spencer``); integrating the sensitivities S = ∂s/∂θ beside the
+states costs one, a few times a plain simulation's price, and is exact. Differentiating the discrete RK4
+step, not the continuous law, on the sub-step schedule of the base simulation (replayed, as the finite
+differences replay it), the stage sensitivities are
+
+    K_i = J_s(t_i, s_i) T_i + J_θ(t_i, s_i),   T_i = S + c_i h K_{i−1},   S ← S + h/6 (K₁ + 2K₂ + 2K₃ + K₄),
+
+with J_s = ∂ṡ/∂s and J_θ = ∂ṡ/∂θ at each stage's state: for an explicit Runge–Kutta method with fixed steps,
+discretising the variational equations and differentiating the discretisation give the same numbers (Hairer,
+Nørsett & Wanner, *Solving ODEs I*, §I.14), so S is the derivative of what the simulator computes, to
+rounding, and the output's is ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s. The states themselves are advanced by the
+same operations as :func:`bayes_mr.models.integrate.advance` (same numbers, bit for bit).
+
+Cost, in CPU time on one thread (a 4 s random device test at 1 kHz, published parameters, 18.7 RK4 sub-steps
+per interval): a run with spencer's 14 sensitivities takes 3.4 simulations of the generic kernel, against 13
+for a forward-difference Jacobian (one per free parameter; the base is the step's own residual). Per stage,
+about a third is the rates, a third the partials, a third the products J_s T (ns × ns × n_θ). What brought it
+there: the power |z|ⁿ computed once per stage and shared by the rates and the partials, the coefficients'
+columns written out instead of a loop with a branch per coefficient, and the rates and partials inlined
+(:data:`deriv_pow`). The run is one thread where the finite differences' batch runs on all cores, so on an
+idle two-core machine a single refinement's Jacobian gains less than its CPU time says; fits side by side
+(a search's starts, diagnose's candidates) and a busy machine gain all of it.
+
+Covered: the ``spencer`` form in a device test, with any of the effects whose partials
+:func:`spencer_partials` has (``force_offset``, ``stiffness_drift``, ``asymmetry``, ``command_saturation``,
+``field_decay``, ``cubic_stiffness``, ``shear_thinning``, ``stribeck_friction``; ``inertia`` and
+``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`).
+:func:`bayes_mr.simulation.sensitivity.covered` says which models; the others (the effects with discrete
+updates between sub-steps, ``field_dynamics`` and ``small_amplitude_regime``, the library terms, the other
+forms) keep finite differences.
+Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``) the derivative is that of the side the state is on, which
+is what a finite difference of a step that does not cross it sees.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bayes_mr._compile.jit import driver, hot
+from bayes_mr.models import kernel
+from bayes_mr.models.kernel import (
+    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST,
+)
+
+#: :func:`bayes_mr.models.kernel.deriv_pow` inlined into this module's loops at numba-IR level, as the simulator's
+#: inlined and specialised kernels inline it (:data:`bayes_mr._compile.specialise.INLINE`): with the partials
+#: inlined too, the run's CPU time went from 4.6 to 3.4 simulations of the generic kernel; ~30 s more compile,
+#: once per machine (numba's disk cache).
+deriv_pow = hot(inline="always")(kernel.deriv_pow.py_func)
+
+
+@hot(inline="always")
+def _sgn(v):
+    if v > 0.0:
+        return 1.0
+    if v < 0.0:
+        return -1.0
+    return 0.0
+
+
+@hot(inline="always")
+def _column(jp, fp, i, j, d, g_r, c1):
+    """Column j of a parameter that enters through ẏ only, given d = ∂ẏ/∂θ_j: ẏ's, ż's through r = ẋ − ẏ,
+    and f_r's through c1 ẏ (called once per parameter with its d written out, not from a loop with a branch
+    per parameter)."""
+    jp[i, j] = d
+    jp[i + 1, j] = -g_r * d
+    fp[j] = c1 * d
+
+
+@hot(inline="always")
+def _saturation(lay, p, u):
+    """(u_e, ∂u_e/∂u, ∂u_e/∂u_s): the command the coefficients see (u_s tanh(u/u_s) with command_saturation,
+    else u; :func:`bayes_mr.models.kernel._saturate`) and its derivatives."""
+    if lay[L_CSAT] < 0:
+        return u, 1.0, 0.0
+    us = p[lay[L_CSAT]]
+    q = u / us
+    th = math.tanh(q)
+    return us * th, 1.0 - th * th, th - q * (1.0 - th * th)
+
+
+@hot(inline="always")
+def _fluid_partials(lay, cst, p, xd, fp):
+    """∂f_r/∂θ of the velocity-only forces (kernel._fluid_friction): shear_thinning's c_p, m_hb, v_p and
+    stribeck_friction's F_st, v_s."""
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        cp, mh, vp = p[j], p[j + 1], p[j + 2]
+        q = abs(xd) / vp
+        pw = math.pow(1.0 + q, mh)
+        sg = _sgn(xd)
+        fp[j] = vp * sg * (pw - 1.0) / mh
+        fp[j + 1] = cp * vp * sg * (pw * math.log(1.0 + q) / mh - (pw - 1.0) / (mh * mh))
+        fp[j + 2] = cp * sg * ((pw - 1.0) / mh - pw / (1.0 + q) * q)
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        r = xd / p[j + 1]
+        rr = r * r
+        if rr < 700.0:
+            e = math.exp(-rr)
+            th = math.tanh(r / cst[K_SMOOTH])
+            fp[j] = e * th
+            dfdr = p[j] * e * (-2.0 * r * th + (1.0 - th * th) / cst[K_SMOOTH])
+            fp[j + 1] = -dfdr * r / p[j + 1]
+
+
+@hot(inline="always")
+def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d, g_r,
+                     c1, c1b, yd, jp, fp, i):
+    """The effects' columns (:data:`bayes_mr.simulation.sensitivity.COVERED_EFFECTS` of the kernel's):
+    stiffness_drift, asymmetry, command_saturation, field_decay, force_offset, cubic_stiffness and the fluid
+    forces. ``force`` is k1 x − F_pre (what the drift scales besides α), ``bracket`` ∂ẏ/∂u_e."""
+    if lay[L_DRIFT] >= 0:
+        j = lay[L_DRIFT]
+        _column(jp, fp, i, j, alpha0 * t * z * a_z * inv_d, g_r, c1)
+        fp[j] += t * force
+    if lay[L_ASYM] >= 0:
+        _column(jp, fp, i, lay[L_ASYM], alpha0 * m_s * z * sz * inv_d, g_r, c1)
+    if lay[L_CSAT] >= 0:
+        j = lay[L_CSAT]
+        _, _, due = _saturation(lay, p, us)
+        _column(jp, fp, i, j, bracket * due, g_r, c1)
+        fp[j] += c1b * due * yd
+    if lay[L_FDEC] >= 0:
+        jp[i + 2, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
+    if lay[L_F0] >= 0:
+        fp[lay[L_F0]] = 1.0
+    if lay[L_K3] >= 0:
+        fp[lay[L_K3]] = x * x * x
+    _fluid_partials(lay, cst, p, xd, fp)
+
+
+@hot(inline="always")
+def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
+    """Partial derivatives of spencer's device-test rates and force at time ``t``, inputs ``a`` and state ``s``.
+
+    Writes J_s = ∂ṡ/∂s into ``js`` (ns, ns), J_θ = ∂ṡ/∂θ into ``jp`` (ns, n_θ), ∂f_r/∂s into ``fs`` (ns)
+    and ∂f_r/∂θ into ``fp`` (n_θ); only the entries that can be nonzero (the caller zeroes the arrays once).
+    ``zn`` is |z|ⁿ, computed once per stage by the caller and shared with
+    :func:`~bayes_mr.models.kernel.deriv_pow` (the power is most of a stage's cost).
+    The law (:func:`bayes_mr.models.kernel.deriv`): ẏ = (α a_z z + c0 ẋ + k0 (x − y))/(c0 + c1), r = ẋ − ẏ,
+    ż = −γ|r| sgn(z)|z|ⁿ − β r |z|ⁿ + A r, u̇ = ρ η (v − u), f_r = c1 ẏ + m_k (k1 x − F_pre) + f0 + k3 x³ +
+    the fluid forces, with α = m_s (α_a + α_b u_e), c0, c1 linear in u_e (the saturated command), m_s = m_k
+    = 1 + drift·t, a_z = 1 + asym·sgn z, ρ = r_d while the field falls (field_decay), else 1.
+    d(sgn(z)|z|ⁿ)/dz = n|z|ⁿ⁻¹, finite at z = 0 for n ≥ 1 (the form's range).
+    """
+    o = lay[L_PFORM]
+    i = lay[L_SFORM]
+    x, xd, v = a[0], a[1], a[2]
+    y, z, us = s[i], s[i + 1], s[i + 2]
+    ab, c0b, k0, c1b = p[o + 1], p[o + 3], p[o + 4], p[o + 6]
+    gam, bet, A, n, eta = p[o + 9], p[o + 10], p[o + 11], p[o + 12], p[o + 13]
+    m_s = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
+    sz = _sgn(z)
+    a_z = 1.0 + p[lay[L_ASYM]] * sz if lay[L_ASYM] >= 0 else 1.0
+    ue, due, _ = _saturation(lay, p, us)
+    alpha0 = p[o] + ab * ue
+    alpha = alpha0 * m_s
+    c0 = p[o + 2] + c0b * ue
+    c1 = p[o + 5] + c1b * ue
+    inv_d = 1.0 / (c0 + c1)
+    yd = (alpha * z * a_z + c0 * xd + k0 * (x - y)) * inv_d
+    r = xd - yd
+    az = abs(z)
+    if az > 0.0:
+        zn1 = zn / az  # |z|ⁿ⁻¹ without a second pow
+    else:
+        zn1 = 1.0 if n == 1.0 else 0.0
+    g_r = -gam * _sgn(r) * sz * zn - bet * zn + A  # ∂ż/∂r
+    g_z = -n * zn1 * (gam * abs(r) + bet * r * sz)  # ∂ż/∂z at fixed r
+    bracket = (ab * m_s * z * a_z + c0b * xd - yd * (c0b + c1b)) * inv_d  # ∂ẏ/∂u_e
+    d_y = -k0 * inv_d  # ∂ẏ/∂y, ∂ẏ/∂z, ∂ẏ/∂u
+    d_z = alpha * a_z * inv_d
+    d_u = bracket * due
+    rho = p[lay[L_FDEC]] if lay[L_FDEC] >= 0 and abs(v) < abs(us) else 1.0
+    js[i, i], js[i, i + 1], js[i, i + 2] = d_y, d_z, d_u
+    js[i + 1, i], js[i + 1, i + 1], js[i + 1, i + 2] = -g_r * d_y, g_z - g_r * d_z, -g_r * d_u
+    js[i + 2, i + 2] = -rho * eta
+    fs[i], fs[i + 1], fs[i + 2] = c1 * d_y, c1 * d_z, c1 * d_u + c1b * due * yd
+    w = m_s * z * a_z * inv_d
+    _column(jp, fp, i, o, w, g_r, c1)
+    _column(jp, fp, i, o + 1, ue * w, g_r, c1)
+    _column(jp, fp, i, o + 2, r * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 3, ue * r * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 4, (x - y) * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 5, -yd * inv_d, g_r, c1)
+    _column(jp, fp, i, o + 6, -ue * yd * inv_d, g_r, c1)
+    fp[o + 5] += yd  # f_r's own c1 ẏ
+    fp[o + 6] += ue * yd
+    fp[o + 7] = m_s * x  # m_k = m_s: the drift scales both
+    fp[o + 8] = -m_s
+    jp[i + 1, o + 9] = -abs(r) * sz * zn
+    jp[i + 1, o + 10] = -r * zn
+    jp[i + 1, o + 11] = r
+    jp[i + 1, o + 12] = -(gam * abs(r) * sz + bet * r) * zn * math.log(az) if az > 0.0 else 0.0
+    jp[i + 2, o + 13] = rho * (v - us)
+    _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, p[o + 7] * x - p[o + 8], bracket,
+                     inv_d, g_r, c1, c1b, yd, jp, fp, i)
+
+
+@hot(inline="always")
+def _stage(js, jp, T, K, ns, n_th):
+    """K = J_s T + J_θ (ns, n_θ)."""
+    for q in range(ns):
+        for j in range(n_th):
+            acc = jp[q, j]
+            for r in range(ns):
+                acc += js[q, r] * T[r, j]
+            K[q, j] = acc
+
+
+@hot
+def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, fs, fp):
+    """RK4 over one sample interval in ``n_sub`` sub-steps, states ``s`` and sensitivities ``S`` in place.
+
+    ``k[0]``, ``K[0]`` hold the rates and their sensitivities at (t, s) on entry. The states follow the
+    operations of :func:`bayes_mr.models.integrate.advance` one for one (same nodes, same inputs, same sums).
+    """
+    ns = lay[L_NS]
+    n_th = p.size
+    iz = lay[L_SFORM] + 1
+    ip = lay[L_PFORM] + 12
+    inv_n = 1.0 / n_sub
+    hs = h * inv_n
+    hs6 = hs / 6.0
+    for j in range(n_sub):
+        tj = t + j * hs
+        for st in range(4):
+            if st == 0 and j == 0:
+                continue
+            c = 0.0 if st == 0 else (1.0 if st == 3 else 0.5)
+            f = (j + c) * inv_n
+            for q in range(3):
+                am[q] = a0[q] + f * (a1[q] - a0[q])
+            for q in range(ns):
+                if st == 0:
+                    tmp[q] = s[q]
+                else:
+                    tmp[q] = s[q] + c * hs * k[st - 1, q]
+                for jj in range(n_th):
+                    T[q, jj] = S[q, jj] if st == 0 else S[q, jj] + c * hs * K[st - 1, q, jj]
+            zn = math.pow(abs(tmp[iz]), p[ip])
+            deriv_pow(lay, cst, p, tj + c * hs, am, tmp, k[st], zn)
+            spencer_partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
+            _stage(js, jp, T, K[st], ns, n_th)
+        for q in range(ns):
+            s[q] += hs6 * (k[0, q] + 2.0 * k[1, q] + 2.0 * k[2, q] + k[3, q])
+            for jj in range(n_th):
+                S[q, jj] += hs6 * (K[0, q, jj] + 2.0 * K[1, q, jj] + 2.0 * K[2, q, jj] + K[3, q, jj])
+
+
+@hot(inline="always")
+def _write(out, dout, o, f_r, f_d, fs, fp, S, ns, n_th):
+    """Sample ``o``'s forces and ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s."""
+    out[o, 0] = f_r
+    out[o, 1] = f_d
+    for j in range(n_th):
+        acc = fp[j]
+        for q in range(ns):
+            acc += fs[q] * S[q, j]
+        dout[o, j] = acc
+
+
+@driver(nogil=True)  # nogil: fits side by side on threads (executor.local_threads)
+def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold=False):
+    """Simulate one parameter set from rest with the sensitivities of its force (module docstring).
+
+    Parameters
+    ----------
+    lay, cst, p : ndarray
+        The model's layout, constants and full parameter vector [SI] (as for
+        :func:`~bayes_mr.models.drivers.run_one`).
+    h : float
+        Simulation step [s] (the sample interval over the input's upsampling).
+    inputs : ndarray, shape (N, 3)
+        Input rows as for :func:`~bayes_mr.models.drivers.run_one`.
+    out : ndarray, shape ((N-1)//every + 1, 2)
+        Device test's force f_r and damper force f_d [N] at every ``every``-th row.
+    dout : ndarray, shape ((N-1)//every + 1, n_θ)
+        ∂f_r/∂θ [N per parameter unit] at the same rows.
+    schedule : int64 ndarray, shape (N-1,)
+        RK4 sub-steps of each interval, replayed (a base simulation's; all positive: RK4).
+    every, hold : as for :func:`~bayes_mr.models.drivers.run_one`.
+
+    Returns
+    -------
+    failed_at : int
+        Input row where the state became non-finite, or -1.
+    """
+    ns = lay[L_NS]
+    n_th = p.size
+    N = inputs.shape[0]
+    s, tmp, am, end = np.zeros(ns), np.zeros(ns), np.zeros(3), np.zeros(3)
+    k = np.zeros((4, ns))
+    S, T, K = np.zeros((ns, n_th)), np.zeros((ns, n_th)), np.zeros((4, ns, n_th))
+    js, jp, fs, fp = np.zeros((ns, ns)), np.zeros((ns, n_th)), np.zeros(ns), np.zeros(n_th)
+    for row in range(N):
+        t = row * h
+        zn = math.pow(abs(s[lay[L_SFORM] + 1]), p[lay[L_PFORM] + 12])
+        f_r, f_d = deriv_pow(lay, cst, p, t, inputs[row], s, k[0], zn)
+        spencer_partials(lay, cst, p, t, inputs[row], s, js, jp, fs, fp, zn)
+        if row % every == 0:
+            _write(out, dout, row // every, f_r, f_d, fs, fp, S, ns, n_th)
+        if not math.isfinite(f_r):
+            out[(row + every - 1) // every:] = np.nan
+            dout[(row + every - 1) // every:] = np.nan
+            return row
+        if row == N - 1:
+            break
+        _stage(js, jp, S, K[0], ns, n_th)
+        a1 = inputs[row + 1]
+        if hold:  # the command held from row to row + 1 (drivers._integrate)
+            end[0], end[1], end[2] = a1[0], a1[1], inputs[row, 2]
+            a1 = end
+        _interval(lay, cst, p, t, h, inputs[row], a1, schedule[row], s, S, k, K, T, tmp, am, js, jp, fs, fp)
+    return -1

@@ -1,0 +1,102 @@
+"""A simulation with the exact derivatives of its output: one augmented run instead of p + 1.
+
+:func:`force_sensitivities` runs :func:`bayes_mr.models.sensitivity.run_sensitivities` (RK4 with the forward
+sensitivity equations, differentiated step by step) on a replayed sub-step schedule, so its derivatives are
+those of the simulation a finite difference on that schedule would difference, without its truncation and
+rounding error. :func:`covered` says which models have it; least squares falls back to finite differences
+for the others (:class:`bayes_mr.inference.lsq.refine.Residuals`).
+"""
+
+from __future__ import annotations
+
+from time import perf_counter
+
+import numpy as np
+
+from bayes_mr.models import Model, get_model
+from bayes_mr.models.sensitivity import run_sensitivities
+from bayes_mr.simulation.inputs import Inputs
+from bayes_mr.simulation.simulate import delay, note
+
+#: Effects whose partial derivatives the sensitivity kernel has (besides the form's own), and the two applied
+#: to the kernel's force here, as :func:`~bayes_mr.simulation.simulate.simulate` applies them (``inertia``,
+#: ``sensor_delay``).
+COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "command_saturation", "field_decay",
+                             "cubic_stiffness", "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
+#: Forms, by kind of test, whose partial derivatives it has.
+COVERED_FORMS = {"device": frozenset({"spencer"})}
+
+
+def covered(model: Model | str, kind: str) -> bool:
+    """Whether ``model`` in a ``kind`` test has exact sensitivities (:data:`COVERED_FORMS`, :data:`COVERED_EFFECTS`)."""
+    model = get_model(model)
+    return (model.form.name in COVERED_FORMS.get(kind, ())
+            and all(e.name in COVERED_EFFECTS for e in model.effects))
+
+
+def force_sensitivities(model: Model | str, inputs: Inputs, theta: np.ndarray,
+                        schedule: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """A device test's force and its derivative with respect to every parameter, in one run.
+
+    Parameters
+    ----------
+    model : Model or str
+        A model :func:`covered` for ``inputs.kind``.
+    inputs : Inputs
+    theta : ndarray, shape (P,)
+        Full parameter vector [SI] (``model.param_names(kind)`` order).
+    schedule : ndarray of int, shape (S·(N-1),)
+        The RK4 sub-steps of a simulation of the same inputs (:attr:`~bayes_mr.simulation.simulate.Simulation.schedule`
+        row); the derivatives are those of a simulation on it.
+
+    Returns
+    -------
+    force : ndarray, shape (N,)
+        f_r [N], the same numbers as :func:`~bayes_mr.simulation.simulate.simulate` on that schedule.
+    dforce : ndarray, shape (N, P)
+        ∂f_r/∂θ_j [N per unit of θ_j].
+    failed : int
+        Sample where the state became non-finite, or -1.
+    """
+    model = get_model(model)
+    kind = inputs.kind
+    if not covered(model, kind):
+        raise ValueError(f"{model.name} in a {kind} test has no exact sensitivities (covered: "
+                         f"{COVERED_FORMS}, effects {sorted(COVERED_EFFECTS)})")
+    theta = np.ascontiguousarray(theta, float)
+    S, rows = inputs.upsample, inputs.grid_rows
+    sched = np.ascontiguousarray(np.asarray(schedule, np.int64).ravel())
+    if sched.size != max(rows.shape[0] - 1, 1) or np.any(sched < 1):
+        raise ValueError(f"schedule of {sched.size} counts: this input's grid needs {rows.shape[0] - 1}, "
+                         "all RK4 (positive)")
+    N = inputs.n
+    out = np.empty((N, 2))
+    dout = np.empty((N, theta.size))
+    t0 = perf_counter()
+    failed = run_sensitivities(model.layout(kind), model.constants(inputs.mass), theta, inputs.dt / S, rows, out,
+                               dout, sched, S, inputs.hold)
+    note(1, True, sched[None, :], 0, perf_counter() - t0, sensitivities=True)
+    failed = int((failed + S - 1) // S) if failed >= 0 else -1
+    force = out[:, 0]
+    names = model.param_names(kind)
+    if model.effect("inertia"):  # f += m_e ẍ (simulate), before the delay as there
+        j = names.index("m_e")
+        force = force + theta[j] * inputs.acceleration
+        dout[:, j] = inputs.acceleration
+    if model.delay_channel(kind) is not None:
+        force, dout = _delayed(force, dout, theta[names.index("delay")], inputs.dt, names.index("delay"))
+    return force, dout, failed
+
+
+def _delayed(force: np.ndarray, dforce: np.ndarray, tau: float, dt: float, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """The force lagged by τ [s] as :func:`~bayes_mr.simulation.simulate.delay` lags it (linear interpolation,
+    held at the first sample before it), its sensitivities lagged likewise, and ∂/∂τ: minus the slope of the
+    interpolant at t − τ (0 where the first sample is held; a sample's own time takes the slope after it)."""
+    n = force.size
+    lagged = delay(np.vstack([force, dforce.T]), np.full(dforce.shape[1] + 1, tau), dt)
+    q = (np.arange(n) * dt - tau) / dt
+    k = np.clip(np.floor(q).astype(int), 0, n - 2)
+    slope = np.where(q >= 0.0, (force[k + 1] - force[k]) / dt, 0.0)
+    dforce = lagged[1:].T.copy()
+    dforce[:, j] = -slope
+    return lagged[0], dforce
