@@ -25,7 +25,9 @@ import xarray as xr
 from bayes_mr.execution.executor import job_executor
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.inference.base import Posterior, laplace_draws
-from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, fit_lsq, laplace, peak_from
+from bayes_mr.inference.lsq.joint import fit_any
+from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, laplace, peak_from
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.inference import calibrate
 from bayes_mr.inference.ukf import filter as ukf
 from bayes_mr.inference.lsq.evidence_scale import calibration_info
@@ -50,7 +52,7 @@ class LeastSquares:
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Optimum, Laplace draws (seeded by ``seed``) and Laplace evidence."""
-        return self.posterior(likelihood, fit_lsq(likelihood, self.settings), seed=seed)
+        return self.posterior(likelihood, fit_any(likelihood, self.settings), seed=seed)
 
     def posterior(self, lik: OutputError, res: LSQResult, *, seed: int = 0) -> Posterior:
         """The Laplace posterior of a least-squares optimum ``res`` of ``lik`` (draws seeded by ``seed``);
@@ -68,9 +70,9 @@ class LeastSquares:
              "cost": ("start", np.array([s["cost"] for s in res.starts])),
              "nfev": ("start", np.array([s["nfev"] for s in res.starts]))},
             coords={"param": list(coords.names)})
-        info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
+        info = {"evidence_route": "laplace", "sigma": dict(zip(lik.noise_labels, res.sigma)),
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
-                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels),
+                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.noise_labels),
                 **calibration_info(res.evidence_terms)}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info,
@@ -111,7 +113,7 @@ class Emcee:
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Least squares (:meth:`lsq_settings`), then the chain from its optimum, then the evidence routes."""
-        return self.fit_from(likelihood, fit_lsq(likelihood, self.lsq_settings(seed)), seed=seed, progress=progress)
+        return self.fit_from(likelihood, fit_any(likelihood, self.lsq_settings(seed)), seed=seed, progress=progress)
 
     @staticmethod
     def lsq_settings(seed: int) -> LSQSettings:
@@ -218,6 +220,11 @@ class UKF:
         from bayes_mr.inference.ukf.training import train
         from bayes_mr.inference.ukf.validation import best_run, validate_runs
 
+        if isinstance(likelihood, JointLikelihood):
+            if len(likelihood.parts) > 1:
+                raise ValueError(f"the UKF engine filters one record; {len(likelihood.parts)} were given — fit several "
+                                 "records with --engine lsq or mcmc (one likelihood summed over them)")
+            likelihood = likelihood.parts[0]
         training = train(likelihood, n_lhs=self.n_lhs, taus=self.taus, settings=self.settings, seed=seed,
                          executor=self.executor, chunk_size=self.chunk_size, progress=progress)
         method = 1 if self.validate_on is None else 2

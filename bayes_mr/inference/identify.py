@@ -20,15 +20,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from bayes_mr.data.records import RecordSet
 from bayes_mr.inference import results
 from bayes_mr.inference.base import Estimator
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares, engine
+from bayes_mr.inference.joint_results import build_joint
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.scores.pooled import pooled
 from bayes_mr.models import Model, get_model
 from bayes_mr.scores import score
 from bayes_mr.simulation.simulate import Inputs, simulate
 
-__all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate"]
+__all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate", "validate_records"]
 
 
 def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
@@ -92,16 +96,31 @@ class Identify:
     input_interp: str = "auto"
     command_interp: str = "auto"
 
-    def likelihood(self, record: xr.Dataset) -> OutputError:
-        """The binding of (model, record, noise model) every estimator consumes."""
-        return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
-                           residual=self.noise, input_interp=self.input_interp, command_interp=self.command_interp)
+    def likelihood(self, record: xr.Dataset | RecordSet | list) -> OutputError | JointLikelihood:
+        """The binding of (model, record, noise model) every estimator consumes.
 
-    def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
-        """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's."""
+        A record gives an :class:`OutputError`; several (a :class:`~bayes_mr.data.records.RecordSet`
+        or a list of records) one :class:`~bayes_mr.likelihood.joint.JointLikelihood` summed over them.
+        """
+        options = dict(ranges=self.ranges, fixed=self.fixed, residual=self.noise, input_interp=self.input_interp,
+                       command_interp=self.command_interp)
+        if isinstance(record, xr.Dataset):
+            return OutputError(get_model(self.model), record, **options)
+        return JointLikelihood(get_model(self.model), list(record), **options)
+
+    def fit(self, record: xr.Dataset | RecordSet | list, *, seed: int = 0, progress: bool = True):
+        """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's.
+
+        Several records (a RecordSet or a list) are fitted by one likelihood summed over them; the result
+        is :func:`~bayes_mr.inference.joint_results.build_joint`'s (one record's: exactly that record's fit).
+        """
         t0 = _time.perf_counter()
         lik = self.likelihood(record)
-        idata = results.build(lik, self.estimator.fit(lik, seed=seed, progress=progress))
+        post = self.estimator.fit(lik, seed=seed, progress=progress)
+        if isinstance(lik, JointLikelihood):
+            idata = build_joint(lik, post, about=record.describe() if isinstance(record, RecordSet) else None)
+        else:
+            idata = results.build(lik, post)
         results.set_wall(idata, _time.perf_counter() - t0)
         return idata
 
@@ -149,6 +168,41 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )
+    return out
+
+
+def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -> dict:
+    """:func:`validate` on each of several records, and the scores pooled over them.
+
+    Returns
+    -------
+    dict
+        One record: :func:`validate`'s dict. Several: the same keys with ``mse``, ``rmse``,
+        ``force_nrmse`` and the force errors pooled over every record's scored samples
+        (:func:`bayes_mr.scores.pooled.pooled`), ``masked`` and ``wall_s`` summed,
+        ``validated_on`` every file, and ``records`` (per record: ``file``, ``role``,
+        ``conditions`` and its own scores).
+    """
+    recs = list(records)
+    each = [validate(idata, r, warmup=warmup) for r in recs]
+    if len(each) == 1:
+        return each[0]
+    scored = [_after(r, warmup) for r in recs]
+    keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")
+    for e, r in zip(each, scored):
+        e["n"] = int(r["valid"].values.sum()) if "valid" in r else r.sizes["time"]
+    if any(e["mse"] is None for e in each):
+        total = dict.fromkeys(keys)
+    else:
+        total = pooled(scored, [{k: e[k] for k in keys + ("n",)} for e in each])
+    about = records.describe() if isinstance(records, RecordSet) else [
+        {"file": str(r.attrs.get("source", "")), "role": "test", "conditions": {}} for r in recs]
+    out = dict(each[0])
+    out.update({k: total[k] for k in keys if k in total}, masked=sum(e["masked"] for e in each),
+               wall_s=sum(e["wall_s"] for e in each), validated_on=[e["validated_on"] for e in each],
+               n_records=len(each), records=[{**a, **{k: e[k] for k in keys + ("masked", "n", "input_interp",
+                                                                                "command_interp")}}
+                                             for a, e in zip(about, each)])
     return out
 
 
