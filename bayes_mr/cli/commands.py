@@ -69,6 +69,56 @@ def _read(path: str, args, *, what: str = "record"):
     return rec
 
 
+def _conditions(args) -> dict:
+    """``--set NAME=VALUE`` as conditions: numbers where they read as one; a command must be one [A or V]."""
+    out = {}
+    for name, value in _pairs(getattr(args, "set", None), "--set").items():
+        try:
+            out[name] = float(value)
+        except ValueError:
+            if name in ("current", "voltage"):
+                raise CLIError(f"--set {name}={value}: not a number (the constant {name} in "
+                               f"{'A' if name == 'current' else 'V'})") from None
+            out[name] = value
+    if "current" in out and "voltage" in out:
+        raise CLIError("--set current and --set voltage: a test runs at a constant current or voltage, not both")
+    return out
+
+
+def _read_records(paths: list[str], args):
+    """The verb's DATA: one record (a file, read as :func:`_read` reads it), or a RecordSet of several
+    (files or one manifest CSV, :func:`bayes_mr.data.records.load_records`), ``--set`` conditions applied."""
+    from bayes_mr.data.records import is_manifest, load_records, with_constant_command
+
+    constants = _conditions(args)
+    if len(paths) == 1 and not is_manifest(paths[0]):
+        return with_constant_command(_read(paths[0], args), constants)
+    records = load_records(
+        paths, constants=constants, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
+        columns=getattr(args, "columns", None), quality=not getattr(args, "no_quality", False),
+        trim=getattr(args, "trim", False))
+    for rec in records:
+        for name in ("input_interp", "command_interp"):
+            value = getattr(args, name, "auto")
+            if value != "auto":
+                rec.attrs[name] = value
+    return records
+
+
+def _n_records(rec) -> int:
+    """How many records a RecordSet of :func:`_read_records` holds; 0 for one record read alone."""
+    from bayes_mr.data.records import RecordSet
+
+    return len(rec) if isinstance(rec, RecordSet) else 0
+
+
+def _train_test(rec):
+    """(what a fit fits, what it predicts): a RecordSet's ``train`` and ``test`` rows (None: no test row)."""
+    if not _n_records(rec):
+        return rec, None
+    return rec.split()
+
+
 def _executor(args):
     """The executor of ``--scheduler`` / ``--workers`` (a context: a local cluster is closed after)."""
     from bayes_mr.execution.executor import open_executor
@@ -160,10 +210,13 @@ def _simulate_checks(args, kind: str, params: dict) -> None:
 
 def cmd_fit(args) -> int:
     from bayes_mr.inference import results
-    from bayes_mr.inference.identify import Emcee, Identify, engine
+    from bayes_mr.inference.identify import Emcee, Identify, engine, validate_records
 
-    rec = _read(args.data, args)
+    rec, held_out = _train_test(_read_records(args.data, args))
     options = {}
+    if args.engine == "ukf" and _n_records(rec) > 1:
+        raise CLIError(f"the UKF filters one record; {len(rec)} were given — fit several records with --engine lsq "
+                       "or mcmc (one likelihood summed over them)")
     if getattr(args, "validate", None):
         if args.engine != "ukf":
             raise CLIError("--validate chooses among trained UKF runs (thesis method 2): use it with --engine ukf, "
@@ -184,6 +237,10 @@ def cmd_fit(args) -> int:
                        fixed=_floats(args.fix, "--fix"), noise=args.noise)
         idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
     summary = results.summary_of(idata).to_dict()
+    if _n_records(rec) and "records" not in summary:  # one record from a manifest: still say its conditions
+        summary["records"] = rec.describe()
+    if held_out is not None:  # the manifest's test rows: predicted, not fitted
+        summary["test"] = validate_records(idata, held_out)
     if args.output:
         results.save(idata, args.output)
     _write_json(summary, args.json)
@@ -192,11 +249,17 @@ def cmd_fit(args) -> int:
 
 def cmd_validate(args) -> int:
     from bayes_mr.inference import results
-    from bayes_mr.inference.identify import validate
+    from bayes_mr.inference.identify import validate, validate_records
 
     idata = results.load_result(args.result)
-    rec = _read(args.data, args)
-    _write_json(validate(idata, rec, warmup=args.warmup), args.json)
+    rec = _read_records(args.data, args)
+    if _n_records(rec) and "test" in rec.roles:
+        rec = rec.role("test")  # a manifest's test rows are what a fit on its train rows predicts
+    if _n_records(rec) == 0:
+        out = validate(idata, rec, warmup=args.warmup)
+    else:
+        out = validate_records(idata, rec, warmup=args.warmup)
+    _write_json(out, args.json)
     return 0
 
 
@@ -205,10 +268,17 @@ def cmd_compare(args) -> int:
     from bayes_mr.inference.identify import UKF, Emcee
     from bayes_mr.report.markdown import markdown_table
 
-    rec = _read(args.data, args)
-    other = _read(args.validate, args) if args.validate else None
+    rec, held_out = _train_test(_read_records(args.data, args))
+    if held_out is not None and args.validate:
+        raise CLIError("a manifest with test rows and --validate: give the records to predict one way")
+    other = _read(args.validate, args) if args.validate else held_out
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    engines = [e.strip() for e in args.engines.split(",") if e.strip()]
+    several = _n_records(rec) > 1
+    engines = [e.strip() for e in (args.engines or ("lsq,mcmc" if several else "lsq,mcmc,ukf")).split(",")
+               if e.strip()]
+    if several and "ukf" in engines:
+        raise CLIError(f"the UKF filters one record; {len(rec)} were given — compare them with --engines lsq,mcmc "
+                       "(one likelihood summed over them)")
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else {}
     if args.evidence is not None:
         if "mcmc" not in engines:
@@ -235,7 +305,12 @@ def cmd_compare(args) -> int:
 def cmd_diagnose(args) -> int:
     from bayes_mr.diagnosis.diagnose import diagnose
 
-    rec = _read(args.data, args)
+    rec = _read_records(args.data, args)
+    if _n_records(rec):
+        if len(rec) > 1:
+            raise CLIError(f"diagnose runs on one record for now; {len(rec)} were given — diagnose each record, or "
+                           "fit them with one likelihood by `bayes-mr fit` or `compare`")
+        rec = rec[0]
     other = _read(args.validate, args) if args.validate else None
     with _executor(args) as ex:
         out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,

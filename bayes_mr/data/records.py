@@ -113,6 +113,17 @@ class RecordSet:
         return RecordSet(tuple(self.records[i] for i in keep), tuple(self.conditions[i] for i in keep),
                          tuple(role for _ in keep), self.source, self.units)
 
+    def split(self) -> tuple["RecordSet", "RecordSet | None"]:
+        """(the ``train`` records, the ``test`` records or None): what a fit fits and what it predicts.
+
+        Raises
+        ------
+        ValueError
+            Every record is a ``test`` record: there is nothing to fit.
+        """
+        test = self.role("test") if "test" in self.roles else None
+        return self.role("train"), test
+
     def describe(self) -> list[dict]:
         """Per record: ``file``, ``role`` and its ``conditions`` (JSON-ready)."""
         return [{"file": f, "role": r, "conditions": dict(c)}
@@ -189,7 +200,7 @@ def _manifest_row(src: str, folder: Path, row: dict, units: dict, line: int) -> 
     file = (folder / row["file"]).resolve() if not Path(row["file"]).is_absolute() else Path(row["file"])
     if not file.exists():
         raise Where(src, "file", line).error(f"no such file '{row['file']}'",
-                                             f"paths are relative to the manifest's folder ({folder})")
+                                             f"paths are relative to the manifest's folder ({folder.resolve()})")
     role = row.get("role", "") or "train"
     if role not in ROLES:
         raise Where(src, "role", line).error(f"unknown role '{role}'", f"valid roles: {', '.join(ROLES)} (empty: train)")

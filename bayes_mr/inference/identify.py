@@ -24,7 +24,7 @@ from bayes_mr.data.records import RecordSet
 from bayes_mr.inference import results
 from bayes_mr.inference.base import Estimator
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares, engine
-from bayes_mr.inference.joint_results import build_joint
+from bayes_mr.inference.joint_results import build_any
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.scores.pooled import pooled
@@ -106,7 +106,7 @@ class Identify:
                        command_interp=self.command_interp)
         if isinstance(record, xr.Dataset):
             return OutputError(get_model(self.model), record, **options)
-        return JointLikelihood(get_model(self.model), list(record), **options)
+        return JointLikelihood(get_model(self.model), record, **options)  # a RecordSet keeps its conditions
 
     def fit(self, record: xr.Dataset | RecordSet | list, *, seed: int = 0, progress: bool = True):
         """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's.
@@ -117,10 +117,7 @@ class Identify:
         t0 = _time.perf_counter()
         lik = self.likelihood(record)
         post = self.estimator.fit(lik, seed=seed, progress=progress)
-        if isinstance(lik, JointLikelihood):
-            idata = build_joint(lik, post, about=record.describe() if isinstance(record, RecordSet) else None)
-        else:
-            idata = results.build(lik, post)
+        idata = build_any(lik, post)
         results.set_wall(idata, _time.perf_counter() - t0)
         return idata
 

@@ -56,12 +56,17 @@ def _records_key(lik: JointLikelihood, scores, noise, about: list[dict] | None) 
     out = []
     for r, (part, sc, nz) in enumerate(zip(lik.parts, scores, noise)):
         entry = {"record": r, "file": str(part.record.attrs.get("source", "")), "role": "train", "conditions": {}}
-        entry.update(about[r] if about else {})
+        entry.update(about[r])
         entry.update({k: (sc or {}).get(k) for k in ("mse", "force_errors", "force_nrmse", "rmse")})
         entry.update(masked=int((~part.valid).sum()), n_valid=part.n_valid, input_interp=part.inputs.interp,
                      command_interp=part.inputs.command_interp, **{k: v for k, v in nz.items() if k != "evidence_note"})
         out.append(entry)
     return out
+
+
+def build_any(lik: OutputError | JointLikelihood, post: Posterior) -> az.InferenceData:
+    """:func:`build_joint` for a joint likelihood, :func:`~bayes_mr.inference.results.build` for one record's."""
+    return build_joint(lik, post) if isinstance(lik, JointLikelihood) else results.build(lik, post)
 
 
 def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | None = None) -> az.InferenceData:
@@ -74,7 +79,7 @@ def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | No
     post : Posterior
         The engine's draws (x over every record's σ), point, evidence and diagnostics.
     about : list of dict, optional
-        Per record: ``file``, ``role``, ``conditions`` (:meth:`bayes_mr.data.records.RecordSet.describe`).
+        Per record: ``file``, ``role``, ``conditions`` (default the likelihood's :attr:`~JointLikelihood.about`).
     """
     if len(lik.parts) == 1:
         return results.build(lik.parts[0], post)
@@ -98,7 +103,7 @@ def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | No
             f"[{r}] {n['noise_model']}" for r, n in enumerate(noise)),
         extra={**post.info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
                **describe_interp(first.interp, post.engine, first.command_interp),
-               "n_records": len(lik.parts), "records": _records_key(lik, scores, noise, about)},
+               "n_records": len(lik.parts), "records": _records_key(lik, scores, noise, about or lik.about)},
     )
     joined, offsets = _joined(lik.records)
     ll = _log_likelihood_group(lik, post, joined, offsets)

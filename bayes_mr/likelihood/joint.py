@@ -54,7 +54,8 @@ class JointLikelihood:
     model : Model or str
     records : sequence of xarray.Dataset
         Records of one kind measuring the same output channels (a
-        :class:`~bayes_mr.data.records.RecordSet` is one).
+        :class:`~bayes_mr.data.records.RecordSet` is one; its files, roles and
+        conditions are then kept in :attr:`about`).
     ranges, fixed, noise, residual, input_interp, command_interp
         As :class:`~bayes_mr.likelihood.output_error.OutputError`, the same for every record.
 
@@ -62,12 +63,17 @@ class JointLikelihood:
     ----------
     parts : list of OutputError
         One likelihood per record, sharing the parameterisation.
+    about : list of dict
+        Per record: ``file``, ``role`` and ``conditions`` (what the results report of each record).
     """
 
     def __init__(self, model: Model | str, records: Sequence[xr.Dataset], *, ranges: dict | None = None,
                  fixed: dict | None = None, noise: str = "sampled", residual: str | ResidualModel = "iid",
                  input_interp: str = "auto", command_interp: str = "auto"):
+        about = records.describe() if hasattr(records, "describe") else None
         records = list(records)
+        self.about = about or [{"file": str(r.attrs.get("source", "")), "role": "train", "conditions": {}}
+                               for r in records]
         if not records:
             raise ValueError("a joint likelihood needs at least one record")
         model = get_model(model)
