@@ -101,7 +101,7 @@ def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | No
         trained=post.trained, diverged=post.diverged, wall_s=post.wall_s, point=dict(zip(names, point)),
         rmse=total["rmse"], noise_model=labels[0] if len(labels) == 1 else "; ".join(
             f"[{r}] {n['noise_model']}" for r, n in enumerate(noise)),
-        extra={**post.info, "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
+        extra={**post.info, **_noise_keys(lik, noise), "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
                **describe_interp(first.interp, post.engine, first.command_interp),
                "n_records": len(lik.parts), "records": _records_key(lik, scores, noise, about or lik.about)},
     )
@@ -114,6 +114,17 @@ def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | No
         warnings.simplefilter("ignore", UserWarning)
         idata.add_groups({"log_likelihood": ll})
     return idata
+
+
+def _noise_keys(lik: JointLikelihood, noise: list[dict]) -> dict:
+    """``n_eff`` of the set (channel → the records' effective samples summed: independent records add) and,
+    under AR, ``ar_coef`` (``channel[r]`` → record r's coefficients, labelled as the noise SDs are)."""
+    out = {"n_eff": {c: float(sum(n["n_eff"][c] for n in noise)) for c in lik.channels}}
+    if all("ar_coef" in n for n in noise):
+        out["ar_coef"] = {f"{c}[{r}]": n["ar_coef"][c] for r, n in enumerate(noise) for c in lik.channels}
+    if any("evidence_note" in n for n in noise):
+        out["evidence_note"] = noise[0].get("evidence_note")
+    return out
 
 
 def _joined(records: list[xr.Dataset]) -> tuple[xr.Dataset, np.ndarray]:
