@@ -336,16 +336,19 @@ def _sample_stats_group(post: Posterior) -> xr.Dataset | None:
 def _record_groups(record: xr.Dataset) -> dict[str, xr.Dataset]:
     """``observed_data`` (measured channels) and ``constant_data`` (inputs, ``valid``) of a record."""
     time = record["time"].values
+    coords = {"time": time}
+    if "record" in record.coords:  # several records one after another (bayes_mr.inference.joint_results)
+        coords["record"] = ("time", record["record"].values)
     channels = list(dict.fromkeys(c for c in OUTPUTS[record.attrs["kind"]] + ("force",) if c in record))
     observed = xr.Dataset(
         {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in channels},
-        coords={"time": time},
+        coords=coords,
     )
     inputs = [c for c in ("ground_acceleration", "displacement", "velocity", "voltage") if c in record]
     const = {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in inputs}
     const["valid"] = ("time", record["valid"].values.astype(np.int8) if "valid" in record
                       else np.ones(time.size, np.int8))
-    return {"observed_data": observed, "constant_data": xr.Dataset(const, coords={"time": time})}
+    return {"observed_data": observed, "constant_data": xr.Dataset(const, coords=coords)}
 
 
 def make_inference_data(summary: FitSummary, post: Posterior, names: tuple[str, ...], units: tuple[str, ...],

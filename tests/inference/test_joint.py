@@ -89,6 +89,7 @@ def test_two_record_result_has_the_record_dimension(rec, noisier):
     assert ll["per_record"].dims == ("chain", "draw", "record") and ll.sizes["record"] == 2
     assert set(np.unique(ll["obs_record"].values)) == {0, 1}
     assert idata.posterior_predictive.sizes["time"] == rec.sizes["time"] + noisier.sizes["time"]
+    assert list(np.unique(idata.observed_data["record"].values)) == [0, 1]
 
 
 def test_validate_pools_the_records(rec):
