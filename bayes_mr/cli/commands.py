@@ -214,9 +214,6 @@ def cmd_fit(args) -> int:
 
     rec, held_out = _train_test(_read_records(args.data, args))
     options = {}
-    if args.engine == "ukf" and _n_records(rec) > 1:
-        raise CLIError(f"the UKF filters one record; {len(rec)} were given — fit several records with --engine lsq "
-                       "or mcmc (one likelihood summed over them)")
     if getattr(args, "validate", None):
         if args.engine != "ukf":
             raise CLIError("--validate chooses among trained UKF runs (thesis method 2): use it with --engine ukf, "
@@ -273,12 +270,7 @@ def cmd_compare(args) -> int:
         raise CLIError("a manifest with test rows and --validate: give the records to predict one way")
     other = _read(args.validate, args) if args.validate else held_out
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    several = _n_records(rec) > 1
-    engines = [e.strip() for e in (args.engines or ("lsq,mcmc" if several else "lsq,mcmc,ukf")).split(",")
-               if e.strip()]
-    if several and "ukf" in engines:
-        raise CLIError(f"the UKF filters one record; {len(rec)} were given — compare them with --engines lsq,mcmc "
-                       "(one likelihood summed over them)")
+    engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else {}
     if args.evidence is not None:
         if "mcmc" not in engines:

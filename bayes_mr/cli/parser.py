@@ -159,9 +159,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
                                    "not an evidence: UKF-only comparisons select the lowest MSE).")
     p.add_argument("data", nargs="+", help=DATA_HELP)
     p.add_argument("--models", required=True, help=f"comma-separated FORM[+EFFECT...]; forms: {forms}")
-    p.add_argument("--engines", default=None,
-                   help="comma-separated subset of ukf,mcmc,lsq (default all three; lsq,mcmc for several records: "
-                        "the UKF filters one record)")
+    p.add_argument("--engines", default="lsq,mcmc,ukf", help="comma-separated subset of ukf,mcmc,lsq")
     p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
     p.add_argument("--ukf-lhs", type=int, metavar="N",
                    help="Latin-hypercube priors per index of dispersion for the UKF (default 10: 100 priors)")

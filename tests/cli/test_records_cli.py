@@ -16,6 +16,7 @@ def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("records")
     write_record(_device(), d / "a.csv")
     write_record(_device(), d / "b.csv")
+    write_record(_device().isel(time=slice(None, None, 2)), d / "h.csv")  # another sampling interval
     (d / "m.csv").write_text("file,current [A],role\na.csv,0.5,train\nb.csv,1.0,train\na.csv,0.75,test\n")
     return d
 
@@ -47,14 +48,13 @@ def test_manifest_fits_train_rows_and_predicts_test_rows(files, tmp_path):
 
 
 @pytest.mark.parametrize("argv, says", [
-    (["fit", "{a}", "{a}", "--model", "dahl", "--engine", "ukf"], "the UKF filters one record; 2 were given"),
-    (["compare", "{a}", "{a}", "--models", "dahl", "--engines", "lsq,ukf"], "the UKF filters one record"),
+    (["fit", "{a}", "{h}", "--model", "dahl", "--engine", "ukf"], "h.csv: sampled every 0.004 s, the first record"),
     (["diagnose", "{a}", "{a}", "--model", "dahl"], "diagnose runs on one record for now; 2 were given"),
     (["fit", "{a}", "--model", "dahl", "--set", "current=high"], "--set current=high: not a number"),
 ])
 def test_refusals_are_one_line(files, tmp_path, capsys, argv, says):
     out = tmp_path / "out.json"
-    argv = [a.format(a=files / "a.csv") for a in argv] + ["--quiet", "--json", str(out)]
+    argv = [a.format(a=files / "a.csv", h=files / "h.csv") for a in argv] + ["--quiet", "--json", str(out)]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert says in err and "\n" not in err and not out.exists()

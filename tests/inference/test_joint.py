@@ -1,5 +1,7 @@
 """Several records, one likelihood: the sum over records, and a set of one record is that record to the bit."""
 
+import json
+
 import numpy as np
 import pytest
 from golden.cases import _device, estimator
@@ -109,9 +111,18 @@ def test_emcee_on_two_records(rec):
     assert idata.log_likelihood["per_record"].sizes["record"] == 2
 
 
-def test_ukf_refuses_several_records(rec):
-    with pytest.raises(ValueError, match="UKF engine filters one record"):
-        Identify(MODEL, estimator("ukf")).fit([rec, rec], progress=False)
+def test_ukf_filters_the_records_in_turn(rec, noisier):
+    """One filter run over both records: the states restart at the second's first sample, the parameters carry."""
+    idata = Identify(MODEL, estimator("ukf")).fit([rec, noisier], progress=False)
+    s = summary_of(idata).to_dict()
+    training = idata["ukf_training"]
+    assert s["engine"] == "ukf" and s["n_records"] == 2 and s["trained"] > 0
+    assert json.loads(training.attrs["record_starts"]) == [0, rec.sizes["time"]]
+    assert " + " in s["validated_on"]  # runs chosen by their MSE pooled over both records
+    truth = {"c": 800.0, "F_d": 200.0, "f0": -60.0}
+    for name, value in truth.items():
+        assert abs(s["point"][name] - value) < 0.05 * abs(value), name
+    assert idata.log_likelihood["per_record"].sizes["record"] == 2
 
 
 def test_ar_orders_are_chosen_per_record(rec, noisier):

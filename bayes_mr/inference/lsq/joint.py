@@ -34,12 +34,12 @@ import numpy as np
 from bayes_mr.inference import calibrate
 from bayes_mr.inference.lsq import evidence_scale
 from bayes_mr.inference.lsq.least_squares import (
-    WHITE_P, LSQResult, LSQSettings, ar_terms, fit_lsq, laplace, ml_sd, search)
+    WHITE_P, LSQResult, LSQSettings, ar_terms, fit_lsq, laplace, ml_sd, peak_from, search)
 from bayes_mr.inference.lsq.refine import Residuals, refine
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 
-__all__ = ["JointResiduals", "fit_any", "fit_joint", "laplace_joint"]
+__all__ = ["JointResiduals", "fit_any", "fit_joint", "laplace_any", "laplace_joint", "peak_any", "peak_joint"]
 
 
 class JointResiduals:
@@ -53,6 +53,11 @@ class JointResiduals:
 
     def __call__(self, phi):
         return np.concatenate([f(phi) for f in self.each])
+
+    @property
+    def ok(self) -> bool:
+        """Every record simulated at the last evaluation (a failed one gives its penalty residuals)."""
+        return all(f.last is not None for f in self.each)
 
     def jacobian(self, phi, central: bool = False):
         return np.vstack([f.jacobian(phi, central) for f in self.each])
@@ -150,3 +155,33 @@ def laplace_joint(lik: JointLikelihood, phi: np.ndarray, *, starts=None, wall_s:
         log_evidence=float(terms.log_evidence(1.0)), starts=list(starts or []), wall_s=wall_s,
         hac_lag=max(e["lag"] for e in each), whiteness_p=min(whites) if whites else None, input_noise=eiv,
         evidence_terms=terms)
+
+
+def peak_joint(lik: JointLikelihood, phi0: np.ndarray, max_nfev: int) -> dict:
+    """:func:`~.least_squares.peak_from` of a joint likelihood: its local peak downhill from ``phi0``.
+
+    Each record's residuals are weighted by its noise floor, or (``noise="sampled"``) by its
+    maximum-likelihood σ_r at ``phi0``; the refinement runs on the stacked residuals.
+    """
+    if len(lik.parts) == 1:
+        return peak_from(lik.parts[0], phi0, max_nfev)
+    phi0 = np.asarray(phi0, float)
+    sds = [ml_sd(p, p.predict(phi0)[0][0]) if lik.noise == "sampled" else np.asarray(p.noise_sd, float)
+           for p in lik.parts]
+    fn = JointResiduals(lik.parts, sds)
+    r0 = fn(phi0)
+    cost0 = 0.5 * float(np.sum(r0**2)) if fn.ok else math.inf
+    res = refine(lik, phi0, None, max_nfev, residuals=JointResiduals(lik.parts, sds))
+    improved = bool(np.all(np.isfinite(res.x)) and res.cost < cost0)
+    phi = res.x if improved else phi0
+    return {"phi": phi, "delta": phi - phi0, "nfev": int(res.nfev), "improved": improved}
+
+
+def peak_any(lik, phi0: np.ndarray, max_nfev: int) -> dict:
+    """The likelihood's local peak from ``phi0`` (:func:`peak_joint` or :func:`~.least_squares.peak_from`)."""
+    return peak_joint(lik, phi0, max_nfev) if isinstance(lik, JointLikelihood) else peak_from(lik, phi0, max_nfev)
+
+
+def laplace_any(lik, phi: np.ndarray) -> LSQResult:
+    """Laplace covariance and evidence at φ (:func:`laplace_joint` or :func:`~.least_squares.laplace`)."""
+    return laplace_joint(lik, phi) if isinstance(lik, JointLikelihood) else laplace(lik, phi)
