@@ -190,6 +190,9 @@ def _baseline(record: xr.Dataset, model, settings: LSQSettings, say, noise: str 
               start: dict[str, float] | None = None) -> tuple[Fit, list[dict] | None]:
     """The baseline fit (``model``, from ``start`` or a search; or the form of highest evidence) and the form
     comparison (None if given)."""
+    if not isinstance(record, xr.Dataset):  # a RecordSet or a list: the residual views are one record's
+        raise ValueError("diagnose runs on one record for now: diagnose each record of a set, or fit the set by one "
+                         "likelihood (Identify(...).fit, compare)")
     if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
         raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
     if model is None:

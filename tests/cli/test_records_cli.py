@@ -67,3 +67,13 @@ def test_bad_manifest_names_file_line_and_column(files, tmp_path, capsys):
     assert main(["fit", str(bad), "--model", "dahl", "--json", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{bad}, column 'file', line 3: no such file 'missing.csv'" in err and not out.exists()
+
+
+def test_compare_a_manifest_predicts_its_test_rows(files, tmp_path):
+    out = tmp_path / "cmp.json"
+    assert main(["compare", str(files / "m.csv"), "--models", f"dahl,{MODEL}", "--engines", "lsq", "--json",
+                 str(out), "--quiet"]) == 0
+    c = json.loads(out.read_text())
+    assert c["selected"] == MODEL and [r["conditions"]["current"] for r in c["records"]] == [0.5, 1.0]
+    row = next(r for r in c["rows"] if r["model"] == MODEL)
+    assert row["n_records"] == 2 and row["validation"]["mse"] == pytest.approx(row["mse"], rel=1e-9)

@@ -62,3 +62,12 @@ def test_bad_manifest_is_one_line(folder, text, where):
     msg = str(err.value)
     assert "\n" not in msg and " — " in msg  # one line: what is wrong — what to do
     assert msg.startswith(str(folder / "m.csv")) and where.split(", ", 1)[1] in msg
+
+
+def test_bm_load_reads_a_manifest_or_a_list(folder):
+    import bayes_mr as bm
+
+    path = _manifest(folder, "file,current\na.csv,0.5\na.csv,1\n", "pair.csv")
+    for rs in (bm.load(path), bm.load([folder / "a.csv", folder / "a.csv"], constants={"current": 0.5})):
+        assert isinstance(rs, bm.RecordSet) and len(rs) == 2 and float(rs[0]["current"][0]) == 0.5
+    assert not isinstance(bm.load(folder / "a.csv"), bm.RecordSet)
