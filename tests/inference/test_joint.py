@@ -131,3 +131,25 @@ def test_ar_orders_are_chosen_per_record(rec, noisier):
     assert all(p.residual.resolved for p in lik.parts)
     assert res.evidence_terms.sigma_counts.size == 2  # one ln σ integral per record and channel
     assert np.isfinite(res.log_evidence)
+
+
+def test_a_constant_current_matrix_identifies_the_current_law():
+    """Tests at 0 A and 1 A (the current given as a condition) separate F_d from its current factor 1 + a_v·u,
+    which one constant-current record confounds (it sees only F_d·(1 + a_v·I))."""
+    from bayes_mr.data.records import with_constant_command
+
+    model = get_model("dahl+voltage_dependence")
+    truth = {"c": 800.0, "k": 300.0, "F_d": 200.0, "sigma": 3000.0, "a_v": 2.0, "c_v": 400.0, "eta": 50.0}
+    recs = []
+    for i, current in enumerate((0.0, 1.0)):
+        sig = make_signal("blwn", duration=2.0, fs=500.0, amplitude=0.01, fmax=5.0, seed=3 + i)
+        inputs = {**sig.as_input("device"), "current": np.full(sig.time.size, current)}
+        rec = synthesize(model, model.theta("device", truth), sig.time, inputs, noise=0.01, seed=4 + i,
+                         source=f"{current} A")
+        recs.append(with_constant_command(rec.drop_vars("current"), {"current": current}))
+    alone = fit_joint(JointLikelihood(model, recs[1:], fixed={"eta": 50.0}))
+    both = fit_joint(JointLikelihood(model, recs, fixed={"eta": 50.0}))
+    assert alone.theta["F_d"] * (1 + alone.theta["a_v"]) == pytest.approx(600.0, rel=0.02)
+    assert abs(alone.theta["F_d"] - 200.0) > 100.0  # one current: the split is the prior's, not the data's
+    for name in ("F_d", "a_v", "c_v", "c"):
+        assert abs(both.theta[name] - truth[name]) < 3 * both.sd_theta[name] + 0.005 * truth[name], name
