@@ -131,6 +131,8 @@ def test_ar_orders_are_chosen_per_record(rec, noisier):
     assert all(p.residual.resolved for p in lik.parts)
     assert res.evidence_terms.sigma_counts.size == 2  # one ln σ integral per record and channel
     assert np.isfinite(res.log_evidence)
+    s = summary_of(Identify(MODEL, LeastSquares(n_draws=50), noise="ar").fit([rec, noisier], progress=False)).to_dict()
+    assert set(s["ar_coef"]) == {"force[0]", "force[1]"} and all(r["noise_model"].startswith("ar(") for r in s["records"])
 
 
 def test_a_constant_current_matrix_identifies_the_current_law():
