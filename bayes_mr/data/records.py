@@ -58,6 +58,8 @@ class RecordSet:
         Per record: ``train`` or ``test`` (:data:`ROLES`).
     source : str
         The manifest's path, or "" for a list of files.
+    units : dict
+        Condition name → the unit the manifest's header gave it ("" for none).
     """
 
     records: tuple[xr.Dataset, ...]
@@ -125,9 +127,14 @@ class RecordSet:
         return self.role("train"), test
 
     def describe(self) -> list[dict]:
-        """Per record: ``file``, ``role`` and its ``conditions`` (JSON-ready)."""
-        return [{"file": f, "role": r, "conditions": dict(c)}
-                for f, r, c in zip(self.files, self.roles, self.conditions)]
+        """Per record: ``file``, ``role``, its ``conditions`` and, where the manifest's header gave them, the
+        ``units`` of conditions other than the command (which is in A or V) (JSON-ready)."""
+        out = []
+        for f, r, c in zip(self.files, self.roles, self.conditions):
+            entry = {"file": f, "role": r, "conditions": dict(c)}
+            units = {k: u for k, u in self.units.items() if u and k in c and k not in COMMANDS}
+            out.append({**entry, "units": units} if units else entry)
+        return out
 
 
 def is_manifest(path: str | os.PathLike) -> bool:

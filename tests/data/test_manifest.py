@@ -36,6 +36,7 @@ def test_constant_current_per_file(folder):
     np.testing.assert_array_equal(rs[0]["current"].values, 0.5)
     assert rs[0].attrs["command_from"] == "condition"
     assert "current" not in rs[2] and "voltage" in rs[2]  # the file's own command wins
+    assert rs.describe()[0]["units"] == {"temperature": "C"}
     train, test = rs.split()
     assert len(train) == 2 and len(test) == 1 and test.conditions[0]["temperature"] == 40.0
 
