@@ -20,8 +20,9 @@ from bayes_mr.inference.identify import validate_records
 from bayes_mr.inference.mcmc.budget import over_budget
 from bayes_mr.inference.estimators import Emcee, LeastSquares, engine
 from bayes_mr.inference.joint_results import build_any
-from bayes_mr.inference.lsq.joint import fit_any
-from bayes_mr.inference.lsq.least_squares import LSQResult
+from bayes_mr.inference.lsq.joint import fit_joint
+from bayes_mr.inference.lsq.least_squares import LSQResult, fit_lsq
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 
@@ -94,7 +95,7 @@ def least_squares(model: str, lsq, record: xr.Dataset, noise: str = "iid") -> tu
     """The likelihood of ``model`` on ``record`` and its least-squares fit: what a model's ``lsq`` row and its
     chain share (:func:`lsq_mcmc_job`). Raises what the fit raises (:data:`FIT_ERRORS`)."""
     lik = Identify(model, lsq, noise=noise).likelihood(record)
-    return lik, fit_any(lik, lsq.settings)
+    return lik, (fit_joint if isinstance(lik, JointLikelihood) else fit_lsq)(lik, lsq.settings)
 
 
 def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
