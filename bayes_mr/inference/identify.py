@@ -174,7 +174,8 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -
     Returns
     -------
     dict
-        One record: :func:`validate`'s dict. Several: the same keys with ``mse``, ``rmse``,
+        One record: :func:`validate`'s dict (from a RecordSet with ``records``: its file, role and
+        conditions). Several: the same keys with ``mse``, ``rmse``,
         ``force_nrmse`` and the force errors pooled over every record's scored samples
         (:func:`bayes_mr.scores.pooled.pooled`), ``masked`` and ``wall_s`` summed,
         ``validated_on`` every file, and ``records`` (per record: ``file``, ``role``,
@@ -182,8 +183,8 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -
     """
     recs = list(records)
     each = [validate(idata, r, warmup=warmup) for r in recs]
-    if len(each) == 1:
-        return each[0]
+    if len(each) == 1:  # a manifest's one record: its keys, and what the manifest says of it
+        return {**each[0], "records": records.describe()} if isinstance(records, RecordSet) else each[0]
     scored = [_after(r, warmup) for r in recs]
     keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")
     for e, r in zip(each, scored):

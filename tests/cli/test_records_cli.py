@@ -45,6 +45,7 @@ def test_manifest_fits_train_rows_and_predicts_test_rows(files, tmp_path):
     s = json.loads(out.read_text())
     assert s["n_records"] == 2 and [r["conditions"]["current"] for r in s["records"]] == [0.5, 1.0]
     assert s["test"]["validated_on"].endswith("a.csv") and s["test"]["mse"] > 0
+    assert s["test"]["records"][0]["conditions"] == {"current": 0.75} and s["test"]["records"][0]["role"] == "test"
 
 
 @pytest.mark.parametrize("argv, says", [
