@@ -66,6 +66,15 @@ def test_one_record_fit_gives_todays_numbers(rec):
         assert joint == plain
 
 
+def test_one_record_chain_gives_todays_numbers(rec):
+    plain = summary_of(Identify(MODEL, estimator("mcmc")).fit(rec, progress=False)).to_dict()
+    joint = summary_of(Identify(MODEL, estimator("mcmc")).fit([rec], progress=False)).to_dict()
+    for s in (plain, joint):
+        s.pop("wall_s")
+        s.pop("evidence_routes")  # each route's own wall time
+    assert joint == plain
+
+
 def test_two_records_share_parameters_and_keep_their_noise(rec, noisier):
     lik = JointLikelihood(MODEL, [rec, noisier])
     res = fit_joint(lik)
