@@ -70,6 +70,7 @@ _PUBLIC = {
     "compare": ("bayes_mr.selection.comparison", "compare"),
     "Comparison": ("bayes_mr.selection.result", "Comparison"),
     "crosscheck": ("bayes_mr.selection.comparison", "crosscheck"),
+    "leave_one_out": ("bayes_mr.selection.loco", "leave_one_out"),
     "diagnose": ("bayes_mr.diagnosis.diagnose", "diagnose"),
     "Diagnosis": ("bayes_mr.diagnosis.result", "Diagnosis"),
 }

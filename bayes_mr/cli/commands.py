@@ -248,6 +248,12 @@ def cmd_validate(args) -> int:
     from bayes_mr.inference import results
     from bayes_mr.inference.identify import validate, validate_records
 
+    if args.loco:
+        return _loco(args)
+    if args.model is not None:
+        raise CLIError("--model names the model of --loco's fits; without --loco the model is RESULT.nc's")
+    if args.result is None or not args.data:
+        raise CLIError("validate takes RESULT.nc and the record(s) to predict (or --loco and the records)")
     idata = results.load_result(args.result)
     rec = _read_records(args.data, args)
     if _n_records(rec) and "test" in rec.roles:
@@ -256,8 +262,43 @@ def cmd_validate(args) -> int:
         out = validate(idata, rec, warmup=args.warmup)
     else:
         out = validate_records(idata, rec, warmup=args.warmup)
+    _condition_figure(out.get("by_condition"), args, f"force NRMSE by condition: {out['model']} fitted on "
+                                                      f"{Path(str(out.get('trained_on') or '')).name or 'its records'}")
     _write_json(out, args.json)
     return 0
+
+
+def _loco(args) -> int:
+    """``validate --loco``: leave-one-condition-out over the records (every role), the held-out table."""
+    from bayes_mr.data.records import RecordSet
+    from bayes_mr.selection.loco import leave_one_out
+
+    if args.model is None:
+        raise CLIError("--loco fits a model in each fold: name it with --model FORM[+EFFECT...]")
+    paths = ([args.result] if args.result else []) + list(args.data)
+    if not paths:
+        raise CLIError("--loco takes the records: several files or a manifest CSV")
+    rec = _read_records(paths, args)
+    if not _n_records(rec):
+        rec = RecordSet((rec,))
+    out = leave_one_out(rec, args.model, seed=args.seed, noise=args.noise, warmup=args.warmup,
+                        progress=progress_say(on_terminal(not args.quiet)))
+    _condition_figure(out["table"], args, f"held-out force NRMSE by condition: {args.model}, "
+                                          "fitted on the other tests (least squares)")
+    _write_json(out, args.json)
+    return 0
+
+
+def _condition_figure(rows: list[dict] | None, args, title: str) -> None:
+    """``--figure``: the heat map of the rows' force NRMSE (:func:`bayes_mr.report.figures.condition_map`)."""
+    if not args.figure:
+        return
+    if not rows:
+        raise CLIError("--figure maps the scores of several records by condition: give several records, each "
+                       "with displacement and force (or --loco)")
+    from bayes_mr.report.figures import condition_map, save
+
+    save(condition_map(rows, title=title), args.figure)
 
 
 def cmd_compare(args) -> int:

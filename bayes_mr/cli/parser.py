@@ -141,12 +141,23 @@ def _fit_parsers(sub, forms: str) -> None:
     p = sub.add_parser("validate", help="predict another record with a fitted model (thesis method 2)",
                        description="Simulate the fitted point estimate on another record and score it; "
                                    "same JSON keys as fit.")
-    p.add_argument("result", help="RESULT.nc written by fit -o")
-    p.add_argument("data", nargs="+", help="the other record(s), or a manifest CSV: each is predicted, the scores "
-                                           "also pooled over them")
+    p.add_argument("result", nargs="?", help="RESULT.nc written by fit -o (with --loco: the first record)")
+    p.add_argument("data", nargs="*", help="the other record(s), or a manifest CSV: each is predicted, the scores "
+                                           "also pooled over them and, for several, tabled by condition")
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
     p.add_argument("--warmup", type=float, default=0.0, metavar="SECONDS",
                    help="simulate the first SECONDS but do not score them (transients, steady-state multisines)")
+    p.add_argument("--loco", action="store_true",
+                   help="leave-one-condition-out: no RESULT; for each of the records (files or a manifest) fit "
+                        "--model by least squares on all the others and predict it; the JSON is the table of "
+                        "the held-out scores by condition")
+    p.add_argument("--model", help="(with --loco) the model fitted in each fold, FORM[+EFFECT...]")
+    p.add_argument("--seed", type=int, default=0, help="(with --loco) seed of the least-squares starts")
+    p.add_argument("--noise", choices=("iid", "ar"), default="iid", help="(with --loco) the fits' residual model")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--figure", metavar="MAP.png",
+                   help="a heat map of the force NRMSE by amplitude × frequency, one panel per current or voltage "
+                        "(several records or --loco)")
     _common_data_flags(p)
     _records_flags(p)
 

@@ -30,6 +30,7 @@ from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.scores.pooled import pooled
 from bayes_mr.models import Model, get_model
 from bayes_mr.scores import score
+from bayes_mr.scores.conditions import condition_row
 from bayes_mr.simulation.simulate import Inputs, simulate
 
 __all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate", "validate_records"]
@@ -145,6 +146,11 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         ``warmup_s`` and the new record's ``input_interp`` (its attribute,
         else from its drive's bandwidth) and ``command_interp`` (its attribute, else linear).
     """
+    return validated(idata, record, warmup)[0]
+
+
+def validated(idata, record: xr.Dataset, warmup: float) -> tuple[dict, dict[str, np.ndarray]]:
+    """:func:`validate`'s dict, and the prediction it scored (channel → array, on the record's samples)."""
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
         raise ValueError(f"the result is a {summary.kind} test, the record a {record.attrs['kind']} test")
@@ -155,7 +161,7 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
     inputs = Inputs.from_record(record)
     pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)},
                    inputs.interp, inputs.command_interp)
-    scores = score(_after(record, warmup), pred)
+    scores = score(after_warmup(record, warmup), pred)
     out = summary.to_dict()
     out.update(
         mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
@@ -165,7 +171,7 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )
-    return out
+    return out, pred
 
 
 def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -> dict:
@@ -179,13 +185,17 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -
         ``force_nrmse`` and the force errors pooled over every record's scored samples
         (:func:`bayes_mr.scores.pooled.pooled`), ``masked`` and ``wall_s`` summed,
         ``validated_on`` every file, and ``records`` (per record: ``file``, ``role``,
-        ``conditions`` and its own scores).
+        ``conditions`` and its own scores) and, where every record measures displacement and force,
+        ``by_condition`` (per record: ``record``, ``file``, ``role`` and the condition and scores of
+        :func:`bayes_mr.scores.conditions.condition_row`: amplitude, frequency, command, force NRMSE,
+        peak-force and energy-per-cycle errors).
     """
     recs = list(records)
-    each = [validate(idata, r, warmup=warmup) for r in recs]
+    done = [validated(idata, r, warmup) for r in recs]
+    each = [e for e, _ in done]
     if len(each) == 1:  # a manifest's one record: its keys, and what the manifest says of it
         return {**each[0], "records": records.describe()} if isinstance(records, RecordSet) else each[0]
-    scored = [_after(r, warmup) for r in recs]
+    scored = [after_warmup(r, warmup) for r in recs]
     keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")
     for e, r in zip(each, scored):
         e["n"] = int(r["valid"].values.sum()) if "valid" in r else r.sizes["time"]
@@ -201,11 +211,24 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -
                n_records=len(each), records=[{**a, **{k: e[k] for k in keys + ("masked", "n", "input_interp",
                                                                                 "command_interp")}}
                                              for a, e in zip(about, each)])
+    if all("force" in r and "displacement" in r for r in recs):
+        out["by_condition"] = [{"record": i, "file": a["file"], "role": a["role"],
+                                **by_condition(r, pred["force"], records, i)}
+                               for i, (a, r, (_, pred)) in enumerate(zip(about, scored, done))]
     return out
 
 
-def _after(record: xr.Dataset, warmup: float) -> xr.Dataset:
-    """The record with samples in its first ``warmup`` seconds left out of every score (``valid`` False)."""
+def by_condition(record: xr.Dataset, force_hat: np.ndarray, records: RecordSet | list, i: int) -> dict:
+    """The table row of record ``i`` of a set (:func:`bayes_mr.scores.conditions.condition_row`): the manifest's
+    conditions and units where the set has them, the record's motion otherwise."""
+    if isinstance(records, RecordSet):
+        return condition_row(record, force_hat, conditions=records.conditions[i], units=records.units,
+                             source=records.source)
+    return condition_row(record, force_hat)
+
+
+def after_warmup(record: xr.Dataset, warmup: float) -> xr.Dataset:
+    """The record with samples in its first ``warmup`` seconds [s] left out of every score (``valid`` False)."""
     if warmup == 0:
         return record
     time = record["time"].values

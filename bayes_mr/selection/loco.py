@@ -1,0 +1,98 @@
+"""Leave-one-condition-out cross-validation over a test matrix: does the model predict a test it never saw?
+
+A model fitted on a damper's tests is worth what it predicts of the conditions
+not tested. Each record of a matrix is one condition (an amplitude, a
+frequency, a current); for each in turn the model is fitted by least squares on
+all the others (one likelihood summed over them,
+:class:`bayes_mr.likelihood.joint.JointLikelihood`) and predicts the one left
+out. The table of the held-out scores by condition
+(:func:`bayes_mr.scores.conditions.condition_row`) says where the model fails
+to transfer: which amplitudes, which frequencies, which currents.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Callable
+
+from bayes_mr.data.records import RecordSet
+from bayes_mr.inference.estimators import Emcee, engine
+from bayes_mr.inference.identify import Identify, after_warmup, by_condition, validated
+from bayes_mr.scores.pooled import pooled
+
+
+def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str = "iid", warmup: float = 0.0,
+                  progress: Callable[[str], None] | None = None) -> dict:
+    """Fit ``model`` on all records but one and predict that one, for each record of the set.
+
+    Parameters
+    ----------
+    records : RecordSet
+        At least two records of one device, each measuring displacement and force;
+        roles are ignored (every record is held out once).
+    model : str
+        ``FORM[+EFFECT...]``.
+    seed : int
+        Seed of the least-squares starts (as ``bayes-mr fit --engine lsq --seed``).
+    noise : {"iid", "ar"}
+        The residual model of the fits.
+    warmup : float
+        Seconds at the start of each held-out record simulated but not scored [s].
+    progress : callable, optional
+        Called with one line per fold.
+
+    Returns
+    -------
+    dict
+        ``model``, ``engine`` (``lsq``), ``n_folds``, ``table`` (per held-out record, in the set's
+        order: ``record``, ``file``, ``conditions`` (the manifest's), the row of
+        :func:`bayes_mr.scores.conditions.condition_row` — ``amplitude`` [m], ``frequency`` [Hz],
+        ``command``, ``command_value`` [A or V], ``force_nrmse``, ``peak_force_error``,
+        ``energy_error``, … — and the fold's ``mse``, ``params`` and ``trained_on``), ``pooled``
+        (``mse``, ``rmse``, ``force_nrmse``, ``force_errors`` of every held-out prediction pooled as
+        :func:`bayes_mr.scores.pooled.pooled` pools them), ``worst`` (``file`` and ``force_nrmse`` of
+        the held-out record predicted worst) and ``wall_s``.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two records, or a record without displacement and force.
+    """
+    n = len(records)
+    if n < 2:
+        raise ValueError(f"{records.source or 'record set'}: leave-one-condition-out needs at least two records, "
+                         f"got {n}")
+    missing = [f for f, r in zip(records.files, records) if not ("force" in r and "displacement" in r)]
+    if missing:
+        raise ValueError(f"{missing[0]}: leave-one-condition-out scores the force of a test: the record needs "
+                         "displacement and force channels")
+    t0 = _time.perf_counter()
+    rows, scored = [], []
+    for i in range(n):
+        keep = [j for j in range(n) if j != i]
+        train = RecordSet(tuple(records[j] for j in keep), tuple(records.conditions[j] for j in keep),
+                          ("train",) * len(keep), records.source, records.units)
+        job = Identify(model, engine("lsq", settings=Emcee.lsq_settings(seed)), noise=noise)
+        idata = job.fit(train, seed=seed, progress=False)
+        rows.append(_fold(idata, records, i, warmup, train))
+        scored.append(rows[-1].pop("_scores"))
+        if progress is not None:
+            progress(f"held out {records.files[i]}: force NRMSE {rows[-1]['force_nrmse']:.3g}")
+    total = pooled([s["record"] for s in scored], [s["scores"] for s in scored])
+    worst = max(rows, key=lambda r: r["force_nrmse"])
+    return {"model": model, "engine": "lsq", "n_folds": n, "table": rows,
+            "pooled": {k: total[k] for k in ("mse", "mse_channels", "rmse", "force_nrmse", "force_errors")},
+            "worst": {"file": worst["file"], "force_nrmse": worst["force_nrmse"]},
+            "wall_s": _time.perf_counter() - t0}
+
+
+def _fold(idata, records: RecordSet, i: int, warmup: float, train: RecordSet) -> dict:
+    """The table row of held-out record ``i``, with what :func:`leave_one_out` pools under ``_scores``."""
+    out, pred = validated(idata, records[i], warmup)
+    scored = after_warmup(records[i], warmup)
+    n = int(scored["valid"].values.sum()) if "valid" in scored else scored.sizes["time"]
+    keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")
+    return {"record": i, "file": records.files[i], "conditions": dict(records.conditions[i]),
+            **by_condition(scored, pred["force"], records, i), "mse": out["mse"], "params": out["point"],
+            "trained_on": list(train.files),
+            "_scores": {"record": scored, "scores": {**{k: out[k] for k in keys}, "n": n}}}
