@@ -183,6 +183,42 @@ def command_value(record: xr.Dataset, conditions: Mapping) -> tuple[str | None, 
     return name, (float(u[0]) if np.ptp(u) <= 1e-9 * max(1.0, float(np.max(np.abs(u)))) else None)
 
 
+def condition_of(record: xr.Dataset, conditions: Mapping | None = None, units: Mapping | None = None,
+                   source: str = "") -> dict:
+    """The condition a test ran at: its motion's amplitude and frequency, and its constant command.
+
+    Parameters
+    ----------
+    record : xarray.Dataset
+        A record with ``displacement`` [m] (``valid`` honoured).
+    conditions, units : mapping, optional
+        The manifest's conditions of the test and their units; an ``amplitude`` or
+        ``frequency`` there wins over the estimate from the record (:func:`motion_of`).
+    source : str
+        The manifest, named in an error about a condition's unit.
+
+    Returns
+    -------
+    dict
+        ``amplitude`` [m], ``amplitude_from`` (``manifest`` or ``record``), ``frequency`` [Hz],
+        ``frequency_from``, ``command`` (``current``, ``voltage`` or None), ``command_value`` [A or V;
+        None when it varies] (:func:`command_value`), and ``start``, the first sample of the steady part.
+    """
+    conditions, units = conditions or {}, units or {}
+    valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(record.sizes["time"], bool)
+    fs = 1.0 / float(record["time"].values[1] - record["time"].values[0])
+    amplitude, frequency, start = motion_of(record["displacement"].values, fs, valid)
+    given = {n: _given(conditions, units, n, source) for n in ("amplitude", "frequency")}
+    name, value = command_value(record, conditions)
+    return {
+        "amplitude": given["amplitude"] if given["amplitude"] is not None else amplitude,
+        "amplitude_from": "manifest" if given["amplitude"] is not None else "record",
+        "frequency": given["frequency"] if given["frequency"] is not None else frequency,
+        "frequency_from": "manifest" if given["frequency"] is not None else "record",
+        "command": name, "command_value": value, "start": start,
+    }
+
+
 def condition_row(record: xr.Dataset, force_hat: np.ndarray, *, conditions: Mapping | None = None,
                   units: Mapping | None = None, source: str = "") -> dict:
     """A test's conditions and the prediction's force scores there (the module docstring's table row).
@@ -193,42 +229,31 @@ def condition_row(record: xr.Dataset, force_hat: np.ndarray, *, conditions: Mapp
         A record with ``displacement`` [m] and ``force`` [N] (``valid`` honoured).
     force_hat : array, shape (n,)
         The predicted force [N].
-    conditions, units : mapping, optional
-        The manifest's conditions of the test and their units; an ``amplitude`` or
-        ``frequency`` there wins over the estimate from the record.
-    source : str
-        The manifest, named in an error about a condition's unit.
+    conditions, units, source
+        As :func:`condition_of`.
 
     Returns
     -------
     dict
-        ``amplitude`` [m], ``frequency`` [Hz], ``amplitude_from`` / ``frequency_from`` (``manifest`` or
-        ``record``), ``command`` (``current``, ``voltage`` or None) and ``command_value`` [A or V; None
-        when it varies], ``force_nrmse``, ``peak_force`` and ``peak_force_predicted`` [N],
-        ``peak_force_error`` [-], ``energy_per_cycle`` and ``energy_per_cycle_predicted`` [J],
-        ``energy_error`` [-] (None when no whole cycle is scored), ``cycles``.
+        :func:`condition_of`'s keys but ``start``; ``force_nrmse``, ``peak_force`` and
+        ``peak_force_predicted`` [N], ``peak_force_error`` [-], ``energy_per_cycle`` and
+        ``energy_per_cycle_predicted`` [J], ``energy_error`` [-] (None when no whole cycle is scored),
+        ``cycles``.
     """
     from bayes_mr.scores.metrics import force_nrmse
 
-    conditions, units = conditions or {}, units or {}
+    row = condition_of(record, conditions, units, source)
+    start = row.pop("start")
     valid = record["valid"].values.astype(bool) if "valid" in record else np.ones(record.sizes["time"], bool)
     fs = 1.0 / float(record["time"].values[1] - record["time"].values[0])
-    x = record["displacement"].values
-    amplitude, frequency, start = motion_of(x, fs, valid)
-    given = {n: _given(conditions, units, n, source) for n in ("amplitude", "frequency")}
+    x = _bridged(record["displacement"].values.astype(float), valid)
     f = _bridged(record["force"].values.astype(float), valid)
     f_hat = np.asarray(force_hat, float)
     peak, peak_hat = float(np.max(np.abs(f[valid]))), float(np.max(np.abs(f_hat[valid])))
-    freq = given["frequency"] if given["frequency"] is not None else frequency
-    e, cycles = energy_per_cycle(f, _bridged(x.astype(float), valid), fs, freq, start)
-    e_hat, _ = energy_per_cycle(f_hat, _bridged(x.astype(float), valid), fs, freq, start)
-    name, value = command_value(record, conditions)
+    e, cycles = energy_per_cycle(f, x, fs, row["frequency"], start)
+    e_hat, _ = energy_per_cycle(f_hat, x, fs, row["frequency"], start)
     return {
-        "amplitude": given["amplitude"] if given["amplitude"] is not None else amplitude,
-        "amplitude_from": "manifest" if given["amplitude"] is not None else "record",
-        "frequency": freq, "frequency_from": "manifest" if given["frequency"] is not None else "record",
-        "command": name, "command_value": value,
-        "force_nrmse": force_nrmse(record["force"].values, f_hat, valid),
+        **row, "force_nrmse": force_nrmse(record["force"].values, f_hat, valid),
         "peak_force": peak, "peak_force_predicted": peak_hat, "peak_force_error": (peak_hat - peak) / peak,
         "energy_per_cycle": e, "energy_per_cycle_predicted": e_hat,
         "energy_error": None if e is None or e == 0 else (e_hat - e) / abs(e), "cycles": cycles,

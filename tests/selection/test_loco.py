@@ -10,7 +10,7 @@ from bayes_mr.cli.commands import main
 from bayes_mr.data import write_record
 from bayes_mr.data.records import load_records
 from bayes_mr.models import get_model
-from bayes_mr.selection.loco import leave_one_out
+from bayes_mr.selection.loco import condition_folds, leave_one_out
 from bayes_mr.simulation.simulate import synthesize
 
 MODEL = "dahl+voltage_dependence"
@@ -79,3 +79,17 @@ def test_loco_refusals_are_one_line(matrix, tmp_path, capsys):
         assert says in err and "\n" not in err and not out.exists()
     with pytest.raises(ValueError, match="at least two records"):
         leave_one_out(load_records([matrix / "s0.csv"]), MODEL)
+
+
+def test_repeats_of_a_test_are_one_condition_held_out_together(matrix):
+    """A repeat of the held-out test in the training set would let the fit see the condition it predicts."""
+    (matrix / "repeats.csv").write_text("file,current [A]\ns0.csv,0\ns0.csv,0\ns2.csv,0.5\n")
+    records = load_records(matrix / "repeats.csv")
+    assert condition_folds(records) == [0, 0, 1]
+    assert condition_folds(load_records(matrix / "m.csv")) == [0, 1, 2]  # same motion, another current
+    d = leave_one_out(records, MODEL)
+    assert d["n_folds"] == 2 and [r["fold"] for r in d["table"]] == [0, 0, 1]
+    assert d["table"][0]["trained_on"] == d["table"][1]["trained_on"] == [str((matrix / "s2.csv").resolve())]
+    assert len(d["table"][2]["trained_on"]) == 2
+    with pytest.raises(ValueError, match="every record is at one condition"):
+        leave_one_out(load_records([matrix / "s0.csv", matrix / "s0.csv"], constants={"current": 0.0}), MODEL)
