@@ -250,8 +250,8 @@ def cmd_validate(args) -> int:
 
     if args.loco:
         return _loco(args)
-    if args.model is not None:
-        raise CLIError("--model names the model of --loco's fits; without --loco the model is RESULT.nc's")
+    if args.model is not None or args.fix or args.prior:
+        raise CLIError("--model, --fix and --prior set --loco's fits; without --loco the model is RESULT.nc's")
     if args.result is None or not args.data:
         raise CLIError("validate takes RESULT.nc and the record(s) to predict (or --loco and the records)")
     idata = results.load_result(args.result)
@@ -282,6 +282,7 @@ def _loco(args) -> int:
     if not _n_records(rec):
         rec = RecordSet((rec,))
     out = leave_one_out(rec, args.model, seed=args.seed, noise=args.noise, warmup=args.warmup,
+                        fixed=_floats(args.fix, "--fix"), ranges=_ranges(args.prior),
                         progress=progress_say(on_terminal(not args.quiet)))
     _condition_figure(out["table"], args, f"held-out force NRMSE by condition: {args.model}, "
                                           "fitted on the other tests (least squares)")

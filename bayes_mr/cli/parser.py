@@ -154,6 +154,9 @@ def _fit_parsers(sub, forms: str) -> None:
     p.add_argument("--model", help="(with --loco) the model fitted in each fold, FORM[+EFFECT...]")
     p.add_argument("--seed", type=int, default=0, help="(with --loco) seed of the least-squares starts")
     p.add_argument("--noise", choices=("iid", "ar"), default="iid", help="(with --loco) the fits' residual model")
+    p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="(with --loco) hold a parameter fixed [SI]")
+    p.add_argument("--prior", action="append", metavar="NAME=LO:HI",
+                   help="(with --loco) plausible range of a parameter [SI]")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--figure", metavar="MAP.png",
                    help="a heat map of the force NRMSE by amplitude × frequency, one panel per current or voltage "

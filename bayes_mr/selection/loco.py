@@ -58,6 +58,7 @@ def _same(a: dict, b: dict, tolerance: float) -> bool:
 
 
 def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str = "iid", warmup: float = 0.0,
+                  fixed: dict[str, float] | None = None, ranges: dict[str, tuple[float, float]] | None = None,
                   progress: Callable[[str], None] | None = None) -> dict:
     """Fit ``model`` on the records of all conditions but one and predict that one's, for each condition.
 
@@ -74,6 +75,9 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
         The residual model of the fits.
     warmup : float
         Seconds at the start of each held-out record simulated but not scored [s].
+    fixed, ranges : dict, optional
+        Parameters held fixed [SI] and plausible ranges (LO, HI) [SI] of every fold's fit, as
+        ``bayes-mr fit --fix`` and ``--prior`` give them.
     progress : callable, optional
         Called with one line per fold.
 
@@ -112,7 +116,8 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
         keep = [j for j in range(n) if folds[j] != fold]
         train = RecordSet(tuple(records[j] for j in keep), tuple(records.conditions[j] for j in keep),
                           ("train",) * len(keep), records.source, records.units)
-        job = Identify(model, engine("lsq", settings=Emcee.lsq_settings(seed)), noise=noise)
+        job = Identify(model, engine("lsq", settings=Emcee.lsq_settings(seed)), ranges=ranges or {},
+                       fixed=fixed or {}, noise=noise)
         idata = job.fit(train, seed=seed, progress=False)
         for i in (i for i in range(n) if folds[i] == fold):
             rows[i] = {"fold": fold, **_fold(idata, records, i, warmup, train)}

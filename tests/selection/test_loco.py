@@ -40,9 +40,10 @@ def matrix(tmp_path_factory):
 
 def test_loco_is_one_command_with_its_table_and_heat_map(matrix, tmp_path):
     out, figure = tmp_path / "loco.json", tmp_path / "loco.png"
-    assert main(["validate", "--loco", str(matrix / "m.csv"), "--model", MODEL, "--json", str(out),
+    assert main(["validate", "--loco", str(matrix / "m.csv"), "--model", MODEL, "--fix", "eta=50", "--json", str(out),
                  "--figure", str(figure), "--quiet"]) == 0
     d = json.loads(out.read_text())
+    assert all(r["params"].get("eta", 50.0) == 50.0 for r in d["table"])  # every fold's fit holds it fixed
     assert d["model"] == MODEL and d["engine"] == "lsq" and d["n_folds"] == 3 and figure.stat().st_size > 0
     for row, (amp, freq, current) in zip(d["table"], MATRIX):
         assert row["file"] not in row["trained_on"] and len(row["trained_on"]) == 2
@@ -71,6 +72,7 @@ def test_validate_of_several_records_tables_them_by_condition(matrix, tmp_path):
 def test_loco_refusals_are_one_line(matrix, tmp_path, capsys):
     out = tmp_path / "out.json"
     cases = [(["validate", "--loco", str(matrix / "m.csv")], "--loco fits a model in each fold"),
+             (["validate", str(matrix / "r.nc"), str(matrix / "s0.csv"), "--fix", "eta=50"], "without --loco"),
              (["validate", "--loco", str(matrix / "s0.csv"), "--model", MODEL, "--set", "current=0"],
               "needs at least two records, got 1")]
     for argv, says in cases:
