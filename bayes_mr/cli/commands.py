@@ -340,10 +340,7 @@ def cmd_diagnose(args) -> int:
     from bayes_mr.diagnosis.diagnose import diagnose
 
     rec = _read_records(args.data, args)
-    if _n_records(rec):
-        if len(rec) > 1:
-            raise CLIError(f"diagnose runs on one record for now; {len(rec)} were given — diagnose each record, or "
-                           "fit them with one likelihood by `bayes-mr fit` or `compare`")
+    if _n_records(rec) and len(rec) == 1:
         rec = rec[0]
     other = _read(args.validate, args) if args.validate else None
     with _executor(args) as ex:

@@ -189,7 +189,9 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     p = sub.add_parser("diagnose", help="what the model gets wrong, why, and what extending it gains",
                        description=f"Fit the baseline, look at its residuals, score every effect ({effects}) "
                                    "as an extension, refit the named one(s) and report the gain.")
-    p.add_argument("data", nargs="+", help="record (.csv, .csv.gz, .nc); the diagnosis runs on one record")
+    p.add_argument("data", nargs="+", help="record(s) (.csv, .csv.gz, .nc) or a manifest CSV; on several device tests "
+                   "the baseline is fitted by one likelihood and an effect is kept only if it predicts "
+                   "the conditions it was not fitted on")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
     p.add_argument("--terms", action=argparse.BooleanOptionalAction, default=None,

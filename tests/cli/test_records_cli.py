@@ -50,7 +50,7 @@ def test_manifest_fits_train_rows_and_predicts_test_rows(files, tmp_path):
 
 @pytest.mark.parametrize("argv, says", [
     (["fit", "{a}", "{h}", "--model", "dahl", "--engine", "ukf"], "h.csv: sampled every 0.004 s, the first record"),
-    (["diagnose", "{a}", "{a}", "--model", "dahl"], "diagnose runs on one record for now; 2 were given"),
+    (["diagnose", "{a}", "{a}", "--model", "dahl", "--validate", "{a}"], "validates on each held-out condition"),
     (["fit", "{a}", "--model", "dahl", "--set", "current=high"], "--set current=high: not a number"),
 ])
 def test_refusals_are_one_line(files, tmp_path, capsys, argv, says):
