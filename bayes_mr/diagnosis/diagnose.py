@@ -111,9 +111,13 @@ def diagnose(
 
     Parameters
     ----------
-    record : xarray.Dataset
+    record : xarray.Dataset or RecordSet or sequence of xarray.Dataset
         A record in the package schema (structure or device test; masked
-        samples are left out of every fit and score).
+        samples are left out of every fit and score). Several device tests (a
+        test matrix) are diagnosed by one likelihood, and an effect is kept only
+        where it predicts the conditions it was not fitted on
+        (:mod:`.matrix`; ``search``'s candidates and threshold apply, one effect is
+        named); a set of one is that record.
     model : Model or str, optional
         Baseline, e.g. ``"dahl"`` or ``"lugre+force_offset"``. Default: the
         form with the highest evidence (:func:`select_baseline`).
@@ -212,7 +216,7 @@ def _matrix(records: RecordSet, model, validate, out_dir, seed: int, say, settin
         raise ValueError("diagnose of several records runs on device tests (force and displacement): the held-out "
                          "gain is scored on the force of each test")
     out = diagnose_matrix(records, model, settings=settings, seed=seed, noise=noise, say=say,
-                          names=search.candidates, threshold=search.threshold)
+                          names=search.candidates, threshold=search.threshold, forms=FORMS)
     out["seed"] = seed
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
@@ -224,9 +228,6 @@ def _baseline(record: xr.Dataset, model, settings: LSQSettings, say, noise: str 
               start: dict[str, float] | None = None) -> tuple[Fit, list[dict] | None]:
     """The baseline fit (``model``, from ``start`` or a search; or the form of highest evidence) and the form
     comparison (None if given)."""
-    if not isinstance(record, xr.Dataset):  # a RecordSet or a list: the residual views are one record's
-        raise ValueError("diagnose runs on one record for now: diagnose each record of a set, or fit the set by one "
-                         "likelihood (Identify(...).fit, compare)")
     if record.attrs["kind"] == "structure" and "mass" not in record.attrs:
         raise ValueError(f"{record.attrs.get('source', 'record')}: a structure test needs the storey mass")
     if model is None:

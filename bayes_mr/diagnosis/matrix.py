@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,9 +37,6 @@ from bayes_mr.inference.lsq.refine import refine
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.selection.loco import condition_folds
-
-#: Forms compared when no baseline is given on a matrix (as on one record, :data:`.diagnose.FORMS`).
-FORMS = ("normalized-bouc-wen", "dahl", "lugre", "bouc-wen")
 
 #: Most residual evaluations of each fold's warm refit (:func:`held_out`): it starts at the full-data optimum,
 #: which leaving one condition out moves only a little.
@@ -76,16 +74,15 @@ def finish(lik: JointLikelihood, res) -> Fit:
 
 def fit_baseline(records: RecordSet, model: Model | str, settings: LSQSettings, noise: str = "iid") -> Fit:
     """The baseline fitted from scratch on every record by one likelihood (:func:`~.lsq.joint.fit_joint`)."""
-    from dataclasses import replace
-
     lik = JointLikelihood(get_model(model), list(records), residual=noise)
     return finish(lik, fit_joint(lik, replace(settings, input_noise_replicas=0)))
 
 
-def select_baseline(records: RecordSet, settings: LSQSettings, noise: str, say) -> tuple[Fit, list[dict]]:
-    """Each of :data:`FORMS` fitted jointly; the one of highest Laplace evidence, and one row per form."""
+def select_baseline(records: RecordSet, forms: tuple[str, ...], settings: LSQSettings, noise: str,
+                    say) -> tuple[Fit, list[dict]]:
+    """Each of ``forms`` fitted jointly; the one of highest Laplace evidence, and one row per form."""
     fits, rows = [], []
-    for name in FORMS:
+    for name in forms:
         try:
             f = fit_baseline(records, name, settings, noise)
         except (RuntimeError, ValueError) as exc:
@@ -215,11 +212,33 @@ def by_condition(records: RecordSet, fits: dict[str, Fit]) -> list[dict]:
 
 def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: LSQSettings, seed: int = 0,
                     noise: str = "iid", say=lambda msg: None, names: tuple[str, ...] | None = None,
-                    threshold: float = THRESHOLD) -> dict:
-    """The diagnosis of a matrix (module docstring): the JSON keys of :func:`.diagnose.diagnose` on a set."""
+                    threshold: float = THRESHOLD, forms: tuple[str, ...] = ()) -> dict:
+    """The diagnosis of a matrix (module docstring): the JSON keys of :func:`.diagnose.diagnose` on a set.
+
+    Parameters
+    ----------
+    records : RecordSet
+        Device tests of one damper (at least two).
+    model : Model or str or None
+        The baseline; None: the one of ``forms`` of highest joint Laplace evidence.
+    settings : LSQSettings
+        Settings of the baseline's least-squares fit.
+    seed : int
+        Seed of the effects' starts.
+    noise : {"iid", "ar"}
+        Residual model of every fit.
+    say : callable
+        Progress, one line per stage.
+    names : tuple of str, optional
+        Effects tried (None: every one :func:`candidates` offers).
+    threshold : float
+        Score an effect must pass (:data:`~.screen.THRESHOLD`).
+    forms : tuple of str
+        Forms compared when ``model`` is None.
+    """
     t0 = _time.perf_counter()
     if model is None:
-        base, baselines = select_baseline(records, settings, noise, say)
+        base, baselines = select_baseline(records, forms, settings, noise, say)
     else:
         base, baselines = fit_baseline(records, model, settings, noise), None
     say(f"baseline {base.name} on {len(records)} records: MSE {base.mse:.4g}")
