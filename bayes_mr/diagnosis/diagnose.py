@@ -116,8 +116,8 @@ def diagnose(
         samples are left out of every fit and score). Several device tests (a
         test matrix) are diagnosed by one likelihood, and an effect is kept only
         where it predicts the conditions it was not fitted on
-        (:mod:`.matrix`; ``search``'s candidates and threshold apply, one effect is
-        named); a set of one is that record.
+        (:mod:`.matrix`: forward selection, ``search``'s candidates, threshold and
+        most effects apply); a set of one is that record.
     model : Model or str, optional
         Baseline, e.g. ``"dahl"`` or ``"lugre+force_offset"``. Default: the
         form with the highest evidence (:func:`select_baseline`).
@@ -216,7 +216,8 @@ def _matrix(records: RecordSet, model, validate, out_dir, seed: int, say, settin
         raise ValueError("diagnose of several records runs on device tests (force and displacement): the held-out "
                          "gain is scored on the force of each test")
     out = diagnose_matrix(records, model, settings=settings, seed=seed, noise=noise, say=say,
-                          names=search.candidates, threshold=search.threshold, forms=FORMS)
+                          names=search.candidates, threshold=search.threshold,
+                          max_effects=search.max_effects, forms=FORMS)
     out["seed"] = seed
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)

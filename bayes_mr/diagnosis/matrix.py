@@ -171,15 +171,15 @@ def _fold_predictions(f: Fit, records: RecordSet, folds: list[int]) -> list[dict
     return out
 
 
-def held_out(records: RecordSet, folds: list[int], base_pred: list, ext: Fit, training_gain: float) -> dict:
-    """Leave-one-condition-out gain of ``ext`` over the baseline's held-out predictions ``base_pred``.
+def held_out(records: RecordSet, base_pred: list, pred: list, training_gain: float) -> dict:
+    """Leave-one-condition-out gain of an extension's held-out predictions ``pred`` over the base's ``base_pred``
+    (:func:`_fold_predictions`: each record predicted by the fit without its condition).
 
-    Returns ``held_out_mse_ratio`` (Σ_r n_r MSE_r of the extension over the baseline's, every record predicted
-    by the fit without its condition), ``held_out_gain`` (1 − that ratio), ``transfer_share`` (held-out over
-    ``training_gain``, 1 − the training MSE ratio), ``transfers`` (a positive held-out gain of at least
-    :data:`TRANSFER_SHARE` of the training gain) and ``held_out`` (per record: the two held-out MSEs).
+    Returns ``held_out_mse_ratio`` (Σ_r n_r MSE_r of the extension over the base's), ``held_out_gain``
+    (1 − that ratio), ``transfer_share`` (held-out over ``training_gain``, 1 − the training MSE ratio),
+    ``transfers`` (a positive held-out gain of at least :data:`TRANSFER_SHARE` of the training gain) and
+    ``held_out`` (per record: the two held-out MSEs).
     """
-    pred = _fold_predictions(ext, records, folds)
     rows, num, den = [], 0.0, 0.0
     for i, rec in enumerate(records):
         n = float(rec["valid"].values.sum())
@@ -212,7 +212,7 @@ def by_condition(records: RecordSet, fits: dict[str, Fit]) -> list[dict]:
 
 def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: LSQSettings, seed: int = 0,
                     noise: str = "iid", say=lambda msg: None, names: tuple[str, ...] | None = None,
-                    threshold: float = THRESHOLD, forms: tuple[str, ...] = ()) -> dict:
+                    threshold: float = THRESHOLD, max_effects: int = 3, forms: tuple[str, ...] = ()) -> dict:
     """The diagnosis of a matrix (module docstring): the JSON keys of :func:`.diagnose.diagnose` on a set.
 
     Parameters
@@ -233,6 +233,8 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
         Effects tried (None: every one :func:`candidates` offers).
     threshold : float
         Score an effect must pass (:data:`~.screen.THRESHOLD`).
+    max_effects : int
+        Most effects added (forward selection: each round re-screens the rest on the model so far).
     forms : tuple of str
         Forms compared when ``model`` is None.
     """
@@ -242,53 +244,77 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
     else:
         base, baselines = fit_baseline(records, model, settings, noise), None
     say(f"baseline {base.name} on {len(records)} records: MSE {base.mse:.4g}")
-    ranked = rank([extend(records, base, e, seed=seed, noise=noise)
-                   for e in candidates(base.model, records, names)], threshold)
     folds = condition_folds(records)
-    base_pred = _fold_predictions(base, records, folds) if max(folds) > 0 else None
-    rows, chosen = [], None
+    first = held = _fold_predictions(base, records, folds) if max(folds) > 0 else None
+    current, selected, rounds = base, [], []
+    for _ in range(max_effects):
+        have = {c.name for c, _ in selected}
+        offered = [e for e in candidates(current.model, records, names) if e.name not in have]
+        if not offered:
+            break
+        rows, chosen, pred = _round(records, current, offered, folds, held, seed=seed, noise=noise,
+                                    threshold=threshold, say=say)
+        rounds.append(rows)
+        if chosen is None:
+            break
+        selected.append((chosen, next(r for r in rows if r["selected"])))
+        current, held = chosen.fit, pred
+    total = held_out(records, first, held, 1.0 - current.mse / base.mse) if selected else None
+    return _report(records, base, baselines, selected, rounds, total, folds, threshold, t0)
+
+
+def _round(records: RecordSet, current: Fit, offered: list, folds: list[int], held: list | None, *, seed: int,
+           noise: str, threshold: float, say) -> tuple[list[dict], Candidate | None, list | None]:
+    """One round of forward selection on the matrix: every offered effect fitted on ``current`` and ranked
+    (:func:`.ranking.rank`); each passing one's held-out gain over ``held`` (``current``'s held-out predictions;
+    None when every record is at one condition); the best-ranked that transfers is chosen.
+
+    Returns the round's rows (the ``causes`` entries), the chosen candidate (or None) and its held-out predictions.
+    """
+    ranked = rank([extend(records, current, e, seed=seed, noise=noise) for e in offered], threshold)
+    rows, chosen, chosen_pred = [], None, None
     for c in ranked:
         row = {**c.to_dict(), "training_gain": _num(1.0 - c.mse_ratio), "selected": False}
-        if passes(c, threshold) and base_pred is None:
+        if passes(c, threshold) and held is None:
             row["note"] = "every record at one condition: no held-out condition to measure a transfer on"
         elif passes(c, threshold):
-            row.update({k: v for k, v in held_out(records, folds, base_pred, c.fit, 1.0 - c.mse_ratio).items()})
+            pred = _fold_predictions(c.fit, records, folds)
+            row.update(held_out(records, held, pred, 1.0 - c.mse_ratio))
             if not row["transfers"]:
                 row["note"] = NOT_TRANSFERRED
             elif chosen is None:
-                chosen, row["selected"] = c, True
+                chosen, chosen_pred, row["selected"] = c, pred, True
             say(f"  {c.name}: training gain {row['training_gain']:.3g}, held-out gain {row['held_out_gain']:.3g}")
         rows.append(row)
-    return _report(records, base, baselines, chosen, rows, folds, threshold, t0)
+    return rows, chosen, chosen_pred
 
 
-def _report(records: RecordSet, base: Fit, baselines, chosen: Candidate | None, rows: list[dict],
+def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: list[list[dict]], total: dict | None,
             folds: list[int], threshold: float, t0: float) -> dict:
-    """The ``diagnose`` JSON keys of a matrix."""
-    ext = chosen.fit if chosen is not None else base
-    kept = next((r for r in rows if r["selected"]), None)
-    passed = [r for r in rows if "note" in r]
-    if chosen is not None:
-        verdict = f"explained by {chosen.name}, which transfers to held-out conditions"
-    elif passed:
-        verdict = "; ".join(f"{r['name']}: {r['note']}" for r in passed)
+    """The ``diagnose`` JSON keys of a matrix: ``selected`` holds (candidate, its round's row) per effect added,
+    ``total`` the held-out gain of the final model over the baseline (None when nothing was added)."""
+    names = [c.name for c, _ in selected]
+    ext = selected[-1][0].fit if selected else base
+    notes = [f"{r['name']}: {r['note']}" for rows in rounds for r in rows if "note" in r]
+    if selected:
+        verdict = "; ".join([f"explained by {'+'.join(names)}, which transfers to held-out conditions"] + notes)
     else:
-        verdict = "no effect passes on the joint likelihood"
-    fits = {"baseline": base} if chosen is None else {"baseline": base, "extended": ext}
+        verdict = "; ".join(notes) or "no effect passes on the joint likelihood"
+    fits = {"baseline": base} if not selected else {"baseline": base, "extended": ext}
+    gain = total["held_out_gain"] if total else None
     return {
         "n_records": len(records), "records": records.describe(), "folds": folds, "n_folds": max(folds) + 1,
         "masked": int(sum((~r["valid"].values.astype(bool)).sum() for r in records)),
         "baseline": _fit_dict(base), "baselines": baselines,
-        "cause": chosen.name if chosen is not None else NONE, "effects": [chosen.name] if chosen else [],
-        "causes": rows, "selection": [dict(round=1, **chosen.to_dict())] if chosen is not None else [],
+        "cause": names[0] if names else NONE, "effects": names, "causes": rounds[0] if rounds else [],
+        "selection": [dict(round=i + 1, **row) for i, (_, row) in enumerate(selected)],
         "extended": _fit_dict(ext),
         "gain": {"mse_ratio": _num(ext.mse / base.mse),
                  "delta_log_evidence": _num(ext.result.log_evidence - base.result.log_evidence),
-                 "training_gain": _num(1.0 - ext.mse / base.mse),
-                 "held_out_gain": kept["held_out_gain"] if kept else None,
-                 "held_out_mse_ratio": kept["held_out_mse_ratio"] if kept else None,
+                 "training_gain": _num(1.0 - ext.mse / base.mse), "held_out_gain": gain,
+                 "held_out_mse_ratio": total["held_out_mse_ratio"] if total else None,
                  "validation_mse_ratio": None},
-        "held_out_gain": kept["held_out_gain"] if kept else None, "transfers": kept is not None,
+        "held_out_gain": gain, "transfers": bool(selected),
         "by_condition": by_condition(records, fits), "validation": None, "threshold": threshold,
         "verdict": verdict, "unexplained": _unexplained(ext),
         "wall_s": round(_time.perf_counter() - t0, 2),

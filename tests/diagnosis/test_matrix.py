@@ -42,6 +42,7 @@ def test_an_offset_of_the_device_is_named_kept_and_transfers():
     d = _diagnose([_test(i, a, f, f0=20.0) for i, (a, f) in enumerate(MATRIX)],
                   ("force_offset", "asymmetry", "cubic_stiffness"))
     assert d["n_records"] == 4 and d["n_folds"] == 4 and d["cause"] == "force_offset" and d["transfers"]
+    assert d["effects"] == ["force_offset"] and d["selection"][0]["name"] == "force_offset"
     assert d["extended"]["params"]["f0"] == pytest.approx(20.0, rel=0.05)
     assert d["held_out_gain"] > 0.9 and d["gain"]["training_gain"] > 0.9
     kept = next(c for c in d["causes"] if c["name"] == "force_offset")
