@@ -302,6 +302,7 @@ def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: li
         verdict = "; ".join(notes) or "no effect passes on the joint likelihood"
     fits = {"baseline": base} if not selected else {"baseline": base, "extended": ext}
     gain = total["held_out_gain"] if total else None
+    table = by_condition(records, fits)
     return {
         "n_records": len(records), "records": records.describe(), "folds": folds, "n_folds": max(folds) + 1,
         "masked": int(sum((~r["valid"].values.astype(bool)).sum() for r in records)),
@@ -315,10 +316,19 @@ def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: li
                  "held_out_mse_ratio": total["held_out_mse_ratio"] if total else None,
                  "validation_mse_ratio": None},
         "held_out_gain": gain, "transfers": bool(selected),
-        "by_condition": by_condition(records, fits), "validation": None, "threshold": threshold,
+        "by_condition": table, "worst_condition": _worst(table), "validation": None, "threshold": threshold,
         "verdict": verdict, "unexplained": _unexplained(ext),
         "wall_s": round(_time.perf_counter() - t0, 2),
     }
+
+
+def _worst(table: list[dict]) -> dict:
+    """The test the baseline misses most (highest force NRMSE): ``record``, ``file``, its condition and the
+    baseline's ``force_nrmse`` (and the extension's, when one is kept)."""
+    row = max(table, key=lambda r: _finite(r["baseline"]["force_nrmse"] or -math.inf))
+    out = {k: row[k] for k in ("record", "file", "amplitude", "frequency", "command", "command_value")}
+    out.update({f"{label}_force_nrmse": row[label]["force_nrmse"] for label in ("baseline", "extended") if label in row})
+    return out
 
 
 def _unexplained(f: Fit) -> dict:

@@ -10,8 +10,11 @@ from bayes_mr.cli.commands import main
 from bayes_mr.data import write_record
 from bayes_mr.data.records import RecordSet
 from bayes_mr.diagnosis.diagnose import diagnose
+from bayes_mr.diagnosis.inflation import design_effect
 from bayes_mr.diagnosis.matrix import NOT_TRANSFERRED
 from bayes_mr.diagnosis.search import Search
+from bayes_mr.likelihood.joint import JointLikelihood
+from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 from bayes_mr.simulation.simulate import synthesize
 
@@ -50,6 +53,22 @@ def test_an_offset_of_the_device_is_named_kept_and_transfers():
     # the residual by condition: every test at the baseline's error, every one brought to the noise by the extension
     assert [r["amplitude"] for r in d["by_condition"]] == pytest.approx([a for a, _ in MATRIX], rel=0.03)
     assert all(r["extended"]["force_nrmse"] < 0.5 * r["baseline"]["force_nrmse"] for r in d["by_condition"])
+    # a constant force is the larger a share of the force the smaller the test: the small, slow test is missed most
+    worst = max(d["by_condition"], key=lambda r: r["baseline"]["force_nrmse"])
+    assert d["worst_condition"]["file"] == worst["file"] and d["worst_condition"]["amplitude"] < 0.0075
+
+
+def test_the_design_effect_of_a_set_sums_its_records():
+    # two copies of one record: the iid and HAC covariances both double, and their ratio, κ, is the record's
+    rec = _test(0, 0.005, 2.0, f0=20.0)
+    model = get_model("dahl+force_offset")
+    one, two = OutputError(model, rec), JointLikelihood(model, [rec, rec])
+    phi = one.par.coords.to_phi(np.array([dict(TRUTH, f0=20.0)[n] for n in one.par.names]))
+    idx = [one.par.names.index("f0")]
+    sigma = np.asarray(one.noise_sd, float)
+    k1, _ = design_effect(one, phi, sigma, idx)
+    k2, _ = design_effect(two, phi, np.concatenate([sigma, sigma]), idx)
+    assert k2 == pytest.approx(k1, rel=1e-9) and k1 > 0
 
 
 def test_an_offset_of_one_test_fits_only_its_training_conditions():
