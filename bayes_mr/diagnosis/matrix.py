@@ -98,17 +98,29 @@ def select_baseline(records: RecordSet, forms: tuple[str, ...], settings: LSQSet
 
 def candidates(model: Model, records: RecordSet, names: tuple[str, ...] | None = None) -> list:
     """Effects that can extend ``model`` on the matrix: those applicable to any of its records
-    (:func:`.screen.applicable`), and ``small_amplitude_regime`` where the records' amplitudes differ by more
+    (:func:`.screen.applicable`; the command-dependent ones when the tests' commands differ, :func:`_commands_differ`), and ``small_amplitude_regime`` where the records' amplitudes differ by more
     than a fifth (a regime across tests); not ``sensor_delay``, whose screen scans one record's lags."""
     seen: dict[str, object] = {}
+    varies = _commands_differ(records) or None  # None: each record's own command says
     for rec in records:
-        for e in applicable(model, rec):
+        for e in applicable(model, rec, varies):
             seen.setdefault(e.name, e)
     amps = _amplitudes(records)
     have = {e.name for e in model.effects}
     if "small_amplitude_regime" not in have and max(amps) > 1.2 * min(amps):
         seen.setdefault("small_amplitude_regime", EFFECTS["small_amplitude_regime"])
     return [e for n, e in seen.items() if n != "sensor_delay" and (names is None or n in names)]
+
+
+def _commands_differ(records: RecordSet) -> bool:
+    """Whether the tests' constant commands (``current`` or ``voltage``) differ between records: a matrix of
+    constant currents informs the current dependence (``voltage_dependence``) no single test of it does."""
+    values = set()
+    for rec in records:
+        for name in ("current", "voltage"):
+            if name in rec:
+                values.add((name, round(float(np.median(rec[name].values)), 9)))
+    return len(values) > 1
 
 
 def _amplitudes(records: RecordSet) -> list[float]:

@@ -165,7 +165,7 @@ def _num(v) -> float | None:
 COMPARED_LAWS = ("command_polynomial", "exponential_saturation")
 
 
-def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
+def applicable(model: Model, record: xr.Dataset, command_varies: bool | None = None) -> list[Effect]:
     """Effects that can extend ``model`` on ``record``.
 
     Leaves out effects the model has or its form contains (``spencer``:
@@ -175,7 +175,8 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
     ``field_dynamics``) on a model without a command path (they come in after
     ``voltage_dependence`` is named), device-only effects (``inertia``) on other
     tests, the current laws of :data:`COMPARED_LAWS`, and gives ``sensor_delay`` once per measured channel (structure test:
-    displacement and acceleration can each lag).
+    displacement and acceleration can each lag). ``command_varies`` says whether the command varies where the record
+    alone cannot (a constant current that differs between the tests of a matrix); None: the record's voltage varies.
     """
     kind = record.attrs["kind"]
     have = {e.name for e in model.effects} | set(model.form.built_in)
@@ -183,7 +184,7 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
     for name, effect in EFFECTS.items():
         if name in have or name in COMPARED_LAWS:
             continue
-        if effect.needs_voltage and not varying_voltage(record):
+        if effect.needs_voltage and not (varying_voltage(record) if command_varies is None else command_varies):
             continue
         if (name in ON_COMMAND and not model.commanded) or (name in DEVICE_ONLY and kind != "device"):
             continue

@@ -114,3 +114,26 @@ def test_one_record_through_the_set_path_is_todays_diagnosis():
     alone = diagnose(rec, "dahl", **kw).to_dict()
     assert _untimed(diagnose(_set([rec]), "dahl", **kw).to_dict()) == _untimed(alone)
     assert alone["cause"] == "force_offset" and "n_records" not in alone
+
+
+def test_a_current_law_is_named_on_a_constant_current_matrix():
+    # each test at one constant current: no single record varies its command, the matrix does (0 and 1 A)
+    model = get_model("dahl+voltage_dependence")
+    truth = dict(TRUTH, a_v=2.0, c_v=400.0, eta=50.0)
+    records, conditions = [], []
+    for i, (amp, freq, current) in enumerate(((0.005, 2.0, 0.0), (0.005, 2.0, 1.0), (0.01, 1.0, 0.0),
+                                              (0.01, 1.0, 1.0))):
+        t = np.arange(750) / 500.0
+        w = 2 * np.pi * freq
+        inputs = {"displacement": amp * np.sin(w * t), "velocity": amp * w * np.cos(w * t),
+                  "current": np.full(t.size, current)}
+        records.append(synthesize(model, model.theta("device", truth), t, inputs, noise=0.01, seed=40 + i,
+                                  source=f"c{i}"))
+        conditions.append({"current": current})
+    matrix = RecordSet(tuple(records), tuple(conditions), ("train",) * 4, "matrix", {"current": "A"})
+    d = diagnose(matrix, "dahl", search=Search(candidates=("voltage_dependence", "force_offset")),
+                 progress=False).to_dict()
+    assert d["n_folds"] == 4 and d["effects"] == ["voltage_dependence"] and d["held_out_gain"] > 0.9
+    assert d["extended"]["params"]["a_v"] == pytest.approx(2.0, rel=0.1)
+    assert d["extended"]["params"]["c_v"] == pytest.approx(400.0, rel=0.1)
+    assert [r["command_value"] for r in d["by_condition"]] == [0.0, 1.0, 0.0, 1.0]
