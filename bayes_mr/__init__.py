@@ -5,6 +5,8 @@ Everything a notebook needs is one import away::
     import bayes_mr as bm
 
     record = bm.load("test.csv", mass=50.0)               # read, check, mask faults
+    matrix = bm.load("tests.csv")                         # a manifest (or a list of files): a RecordSet
+    joint = bm.Identify("spencer", bm.LeastSquares()).fit(matrix)  # one likelihood summed over them
     idata = bm.Identify("dahl", bm.Emcee()).fit(record)   # any engine, one result schema
     cmp = bm.compare(record, ["dahl", "lugre"], engines=("lsq",))
     cmp.selected, cmp.table(), cmp.plot()                 # a Comparison
@@ -34,6 +36,8 @@ _PUBLIC = {
     "write_record": ("bayes_mr.data", "write_record"),
     "make_record": ("bayes_mr.data", "make_record"),
     "RecordError": ("bayes_mr.data", "RecordError"),
+    "RecordSet": ("bayes_mr.data.records", "RecordSet"),
+    "load_records": ("bayes_mr.data.records", "load_records"),
     # models and simulation
     "FORMS": ("bayes_mr.models", "FORMS"),
     "EFFECTS": ("bayes_mr.models", "EFFECTS"),
@@ -45,8 +49,10 @@ _PUBLIC = {
     "make_signal": ("bayes_mr.signals", "make_signal"),
     # one likelihood, three engines, one result schema
     "OutputError": ("bayes_mr.likelihood.output_error", "OutputError"),
+    "JointLikelihood": ("bayes_mr.likelihood.joint", "JointLikelihood"),
     "Identify": ("bayes_mr.inference.identify", "Identify"),
     "validate": ("bayes_mr.inference.identify", "validate"),
+    "validate_records": ("bayes_mr.inference.identify", "validate_records"),
     "LeastSquares": ("bayes_mr.inference.estimators", "LeastSquares"),
     "Emcee": ("bayes_mr.inference.estimators", "Emcee"),
     "UKF": ("bayes_mr.inference.estimators", "UKF"),
@@ -64,6 +70,7 @@ _PUBLIC = {
     "compare": ("bayes_mr.selection.comparison", "compare"),
     "Comparison": ("bayes_mr.selection.result", "Comparison"),
     "crosscheck": ("bayes_mr.selection.comparison", "crosscheck"),
+    "leave_one_out": ("bayes_mr.selection.loco", "leave_one_out"),
     "diagnose": ("bayes_mr.diagnosis.diagnose", "diagnose"),
     "Diagnosis": ("bayes_mr.diagnosis.result", "Diagnosis"),
 }

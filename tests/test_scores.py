@@ -71,3 +71,31 @@ def test_noise_override_and_bad_predictions(structure, device):
         Scorer(device, noise_sd={"displacement": 1.0})
     with pytest.raises(ValueError, match="lacks"):
         score(structure, {"displacement": structure["displacement"].values})
+
+
+def test_pooled_scores_are_the_scores_over_every_sample():
+    """The pooled force NRMSE, RMSE and MSE of two records equal the scores over their samples together."""
+    import xarray as xr
+
+    from bayes_mr.scores.metrics import force_nrmse
+    from bayes_mr.scores.pooled import pooled
+
+    rng = np.random.default_rng(3)
+    recs, scores, f_all, fh_all = [], [], [], []
+    for n, scale in ((400, 1.0), (700, 3.0)):
+        f = scale * rng.standard_normal(n) + scale
+        fh = f + 0.1 * rng.standard_normal(n)
+        valid = np.ones(n, bool)
+        valid[::50] = False
+        recs.append(xr.Dataset({"force": ("time", f), "valid": ("time", valid)}))
+        rmse = float(np.sqrt(np.mean((f - fh)[valid] ** 2)))
+        scores.append({"n": int(valid.sum()), "mse": 100 * rmse**2 / 0.01, "rmse": {"force": rmse},
+                       "force_nrmse": force_nrmse(f, fh, valid), "force_errors": None})
+        f_all.append(f[valid])
+        fh_all.append(fh[valid])
+    out = pooled(recs, scores)
+    f, fh = np.concatenate(f_all), np.concatenate(fh_all)
+    assert out["force_nrmse"] == pytest.approx(force_nrmse(f, fh), rel=1e-12)
+    assert out["rmse"]["force"] == pytest.approx(float(np.sqrt(np.mean((f - fh) ** 2))), rel=1e-12)
+    assert out["mse"] == pytest.approx(100 * float(np.mean((f - fh) ** 2)) / 0.01, rel=1e-12)
+    assert out["force_errors"] is None and out["n"] == f.size

@@ -69,6 +69,56 @@ def _read(path: str, args, *, what: str = "record"):
     return rec
 
 
+def _conditions(args) -> dict:
+    """``--set NAME=VALUE`` as conditions: numbers where they read as one; a command must be one [A or V]."""
+    out = {}
+    for name, value in _pairs(getattr(args, "set", None), "--set").items():
+        try:
+            out[name] = float(value)
+        except ValueError:
+            if name in ("current", "voltage"):
+                raise CLIError(f"--set {name}={value}: not a number (the constant {name} in "
+                               f"{'A' if name == 'current' else 'V'})") from None
+            out[name] = value
+    if "current" in out and "voltage" in out:
+        raise CLIError("--set current and --set voltage: a test runs at a constant current or voltage, not both")
+    return out
+
+
+def _read_records(paths: list[str], args):
+    """The verb's DATA: one record (a file, read as :func:`_read` reads it), or a RecordSet of several
+    (files or one manifest CSV, :func:`bayes_mr.data.records.load_records`), ``--set`` conditions applied."""
+    from bayes_mr.data.records import is_manifest, load_records, with_constant_command
+
+    constants = _conditions(args)
+    if len(paths) == 1 and not is_manifest(paths[0]):
+        return with_constant_command(_read(paths[0], args), constants)
+    records = load_records(
+        paths, constants=constants, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
+        columns=getattr(args, "columns", None), quality=not getattr(args, "no_quality", False),
+        trim=getattr(args, "trim", False))
+    for rec in records:
+        for name in ("input_interp", "command_interp"):
+            value = getattr(args, name, "auto")
+            if value != "auto":
+                rec.attrs[name] = value
+    return records
+
+
+def _n_records(rec) -> int:
+    """How many records a RecordSet of :func:`_read_records` holds; 0 for one record read alone."""
+    from bayes_mr.data.records import RecordSet
+
+    return len(rec) if isinstance(rec, RecordSet) else 0
+
+
+def _train_test(rec):
+    """(what a fit fits, what it predicts): a RecordSet's ``train`` and ``test`` rows (None: no test row)."""
+    if not _n_records(rec):
+        return rec, None
+    return rec.split()
+
+
 def _executor(args):
     """The executor of ``--scheduler`` / ``--workers`` (a context: a local cluster is closed after)."""
     from bayes_mr.execution.executor import open_executor
@@ -160,9 +210,9 @@ def _simulate_checks(args, kind: str, params: dict) -> None:
 
 def cmd_fit(args) -> int:
     from bayes_mr.inference import results
-    from bayes_mr.inference.identify import Emcee, Identify, engine
+    from bayes_mr.inference.identify import Emcee, Identify, engine, validate_records
 
-    rec = _read(args.data, args)
+    rec, held_out = _train_test(_read_records(args.data, args))
     options = {}
     if getattr(args, "validate", None):
         if args.engine != "ukf":
@@ -184,6 +234,10 @@ def cmd_fit(args) -> int:
                        fixed=_floats(args.fix, "--fix"), noise=args.noise)
         idata = job.fit(rec, seed=args.seed, progress=not args.quiet)
     summary = results.summary_of(idata).to_dict()
+    if _n_records(rec) and "records" not in summary:  # one record from a manifest: still say its conditions
+        summary["records"] = rec.describe()
+    if held_out is not None:  # the manifest's test rows: predicted, not fitted
+        summary["test"] = validate_records(idata, held_out)
     if args.output:
         results.save(idata, args.output)
     _write_json(summary, args.json)
@@ -192,12 +246,60 @@ def cmd_fit(args) -> int:
 
 def cmd_validate(args) -> int:
     from bayes_mr.inference import results
-    from bayes_mr.inference.identify import validate
+    from bayes_mr.inference.identify import validate, validate_records
 
+    if args.loco:
+        return _loco(args)
+    if args.model is not None or args.fix or args.prior:
+        raise CLIError("--model, --fix and --prior set --loco's fits; without --loco the model is RESULT.nc's")
+    if args.result is None or not args.data:
+        raise CLIError("validate takes RESULT.nc and the record(s) to predict (or --loco and the records)")
     idata = results.load_result(args.result)
-    rec = _read(args.data, args)
-    _write_json(validate(idata, rec, warmup=args.warmup), args.json)
+    rec = _read_records(args.data, args)
+    if _n_records(rec) and "test" in rec.roles:
+        rec = rec.role("test")  # a manifest's test rows are what a fit on its train rows predicts
+    if _n_records(rec) == 0:
+        out = validate(idata, rec, warmup=args.warmup)
+    else:
+        out = validate_records(idata, rec, warmup=args.warmup)
+    _condition_figure(out.get("by_condition"), args, f"force NRMSE by condition: {out['model']} fitted on "
+                                                      f"{Path(str(out.get('trained_on') or '')).name or 'its records'}")
+    _write_json(out, args.json)
     return 0
+
+
+def _loco(args) -> int:
+    """``validate --loco``: leave-one-condition-out over the records (every role), the held-out table."""
+    from bayes_mr.data.records import RecordSet
+    from bayes_mr.selection.loco import leave_one_out
+
+    if args.model is None:
+        raise CLIError("--loco fits a model in each fold: name it with --model FORM[+EFFECT...]")
+    paths = ([args.result] if args.result else []) + list(args.data)
+    if not paths:
+        raise CLIError("--loco takes the records: several files or a manifest CSV")
+    rec = _read_records(paths, args)
+    if not _n_records(rec):
+        rec = RecordSet((rec,))
+    out = leave_one_out(rec, args.model, seed=args.seed, noise=args.noise, warmup=args.warmup,
+                        fixed=_floats(args.fix, "--fix"), ranges=_ranges(args.prior),
+                        progress=progress_say(on_terminal(not args.quiet)))
+    _condition_figure(out["table"], args, f"held-out force NRMSE by condition: {args.model}, "
+                                          "fitted on the other tests (least squares)")
+    _write_json(out, args.json)
+    return 0
+
+
+def _condition_figure(rows: list[dict] | None, args, title: str) -> None:
+    """``--figure``: the heat map of the rows' force NRMSE (:func:`bayes_mr.report.figures.condition_map`)."""
+    if not args.figure:
+        return
+    if not rows:
+        raise CLIError("--figure maps the scores of several records by condition: give several records, each "
+                       "with displacement and force (or --loco)")
+    from bayes_mr.report.figures import condition_map, save
+
+    save(condition_map(rows, title=title), args.figure)
 
 
 def cmd_compare(args) -> int:
@@ -205,8 +307,10 @@ def cmd_compare(args) -> int:
     from bayes_mr.inference.identify import UKF, Emcee
     from bayes_mr.report.markdown import markdown_table
 
-    rec = _read(args.data, args)
-    other = _read(args.validate, args) if args.validate else None
+    rec, held_out = _train_test(_read_records(args.data, args))
+    if held_out is not None and args.validate:
+        raise CLIError("a manifest with test rows and --validate: give the records to predict one way")
+    other = _read(args.validate, args) if args.validate else held_out
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     estimators = {"ukf": UKF(n_lhs=args.ukf_lhs)} if args.ukf_lhs else {}
@@ -235,7 +339,9 @@ def cmd_compare(args) -> int:
 def cmd_diagnose(args) -> int:
     from bayes_mr.diagnosis.diagnose import diagnose
 
-    rec = _read(args.data, args)
+    rec = _read_records(args.data, args)
+    if _n_records(rec) and len(rec) == 1:
+        rec = rec[0]
     other = _read(args.validate, args) if args.validate else None
     with _executor(args) as ex:
         out = diagnose(rec, args.model, validate=other, out_dir=args.out, seed=args.seed,

@@ -17,6 +17,19 @@ def _common_data_flags(p: argparse.ArgumentParser) -> None:
     _input_interp_flag(p)
 
 
+#: Help of a verb's DATA: one or more records, or a manifest.
+DATA_HELP = ("record(s): one or more files (.csv, .csv.gz, .nc, .mat, .h5), fitted by one likelihood summed over "
+             "them, or a manifest CSV (a 'file' column, paths relative to it; per-file conditions such as "
+             "'current [A]'; optional 'role' train/test)")
+
+
+def _records_flags(p: argparse.ArgumentParser) -> None:
+    """``--set NAME=VALUE``: a condition of every record (a constant command where a file has none)."""
+    p.add_argument("--set", action="append", metavar="NAME=VALUE",
+                   help="a condition of every record, e.g. current=0.5 [A] or voltage=2 [V]: a constant command "
+                        "becomes the record's command channel where the file has none (a manifest's cell wins)")
+
+
 def _reading_flags(p: argparse.ArgumentParser) -> None:
     """How a record's file is read: units, column names, quality control."""
     p.add_argument("--units", action="append", metavar="COLUMN=UNIT",
@@ -112,7 +125,7 @@ def _fit_parsers(sub, forms: str) -> None:
     p = sub.add_parser("fit", help="fit one model with one estimator",
                        description="Fit a model to a record. Writes the fit JSON (docs/CONTRACT.md) and, with -o, "
                                    "the full result (ArviZ InferenceData, netCDF).")
-    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("data", nargs="+", help=DATA_HELP)
     p.add_argument("--model", required=True, help=f"FORM[+EFFECT...]; forms: {forms}")
     p.add_argument("--engine", choices=("ukf", "mcmc", "lsq"), default="lsq", help="estimator (default lsq)")
     p.add_argument("--validate", metavar="DATA2",
@@ -123,16 +136,33 @@ def _fit_parsers(sub, forms: str) -> None:
     _evidence_flag(p, "--engine mcmc")
     _executor_flags(p, "the UKF's training runs (--engine ukf)")
     _job_flags(p, out=None, json=("SUMMARY.json", "write the summary here (default: stdout)"))
+    _records_flags(p)
 
     p = sub.add_parser("validate", help="predict another record with a fitted model (thesis method 2)",
                        description="Simulate the fitted point estimate on another record and score it; "
                                    "same JSON keys as fit.")
-    p.add_argument("result", help="RESULT.nc written by fit -o")
-    p.add_argument("data", help="the other record")
+    p.add_argument("result", nargs="?", help="RESULT.nc written by fit -o (with --loco: the first record)")
+    p.add_argument("data", nargs="*", help="the other record(s), or a manifest CSV: each is predicted, the scores "
+                                           "also pooled over them and, for several, tabled by condition")
     p.add_argument("--json", metavar="OUT.json", help="write here (default: stdout)")
     p.add_argument("--warmup", type=float, default=0.0, metavar="SECONDS",
                    help="simulate the first SECONDS but do not score them (transients, steady-state multisines)")
+    p.add_argument("--loco", action="store_true",
+                   help="leave-one-condition-out: no RESULT; for each of the records (files or a manifest) fit "
+                        "--model by least squares on all the others and predict it; the JSON is the table of "
+                        "the held-out scores by condition")
+    p.add_argument("--model", help="(with --loco) the model fitted in each fold, FORM[+EFFECT...]")
+    p.add_argument("--seed", type=int, default=0, help="(with --loco) seed of the least-squares starts")
+    p.add_argument("--noise", choices=("iid", "ar"), default="iid", help="(with --loco) the fits' residual model")
+    p.add_argument("--fix", action="append", metavar="NAME=VALUE", help="(with --loco) hold a parameter fixed [SI]")
+    p.add_argument("--prior", action="append", metavar="NAME=LO:HI",
+                   help="(with --loco) plausible range of a parameter [SI]")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--figure", metavar="MAP.png",
+                   help="a heat map of the force NRMSE by amplitude × frequency, one panel per current or voltage "
+                        "(several records or --loco)")
     _common_data_flags(p)
+    _records_flags(p)
 
 
 def _compare_parsers(sub, forms: str, effects: str) -> None:
@@ -141,7 +171,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
                                    "errors, log evidence and Bayes factors; the model is selected by evidence "
                                    "(TI with mcmc, else Laplace with lsq; the UKF's innovation likelihood is "
                                    "not an evidence: UKF-only comparisons select the lowest MSE).")
-    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("data", nargs="+", help=DATA_HELP)
     p.add_argument("--models", required=True, help=f"comma-separated FORM[+EFFECT...]; forms: {forms}")
     p.add_argument("--engines", default="lsq,mcmc,ukf", help="comma-separated subset of ukf,mcmc,lsq")
     p.add_argument("--validate", metavar="DATA2", help="every fit also predicts this record (thesis method 2)")
@@ -154,11 +184,14 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     _executor_flags(p, "the models × engines fits")
     _job_flags(p, out="also write every fit as netCDF and the table as CSV here",
                json=("OUT.json", "write the comparison here (default: stdout)"))
+    _records_flags(p)
 
     p = sub.add_parser("diagnose", help="what the model gets wrong, why, and what extending it gains",
                        description=f"Fit the baseline, look at its residuals, score every effect ({effects}) "
                                    "as an extension, refit the named one(s) and report the gain.")
-    p.add_argument("data", help="record (.csv, .csv.gz, .nc)")
+    p.add_argument("data", nargs="+", help="record(s) (.csv, .csv.gz, .nc) or a manifest CSV; on several device tests "
+                   "the baseline is fitted by one likelihood and an effect is kept only if it predicts "
+                   "the conditions it was not fitted on")
     p.add_argument("--model", help="baseline FORM[+EFFECT...] (default: the form with the highest evidence)")
     p.add_argument("--validate", metavar="DATA2", help="error ratio of extended/baseline on this record (method 2)")
     p.add_argument("--terms", action=argparse.BooleanOptionalAction, default=None,
@@ -172,6 +205,7 @@ def _compare_parsers(sub, forms: str, effects: str) -> None:
     _executor_flags(p, "the candidate effects' fits")
     _job_flags(p, out="write the Markdown report, figures, baseline.nc and extended.nc here",
                json=("REPORT.json", "write the report here (default: stdout)"))
+    _records_flags(p)
 
 
 def _job_parsers(sub) -> None:

@@ -40,7 +40,9 @@ from bayes_mr.execution.progress import say as progress_say
 from bayes_mr.scores import score
 from bayes_mr.diagnosis.fits import Fit, fit_model, inference_data, predict
 from bayes_mr.diagnosis.residuals import residual_views, varying_voltage
+from bayes_mr.data.records import RecordSet
 from bayes_mr.diagnosis.extend import fit_at
+from bayes_mr.diagnosis.matrix import diagnose_matrix
 from bayes_mr.diagnosis.ranking import ambiguous
 from bayes_mr.diagnosis.result import Diagnosis
 from bayes_mr.diagnosis.search import Search
@@ -109,9 +111,13 @@ def diagnose(
 
     Parameters
     ----------
-    record : xarray.Dataset
+    record : xarray.Dataset or RecordSet or sequence of xarray.Dataset
         A record in the package schema (structure or device test; masked
-        samples are left out of every fit and score).
+        samples are left out of every fit and score). Several device tests (a
+        test matrix) are diagnosed by one likelihood, and an effect is kept only
+        where it predicts the conditions it was not fitted on
+        (:mod:`.matrix`: forward selection, ``search``'s candidates, threshold and
+        most effects apply); a set of one is that record.
     model : Model or str, optional
         Baseline, e.g. ``"dahl"`` or ``"lugre+force_offset"``. Default: the
         form with the highest evidence (:func:`select_baseline`).
@@ -161,6 +167,11 @@ def diagnose(
     say = progress_say(progress)
     settings = settings or LSQSettings(seed=seed)
     search = Search(route=search) if isinstance(search, str) else search
+    if not isinstance(record, xr.Dataset):  # a RecordSet or a list: one record is that record's diagnosis
+        records = _as_set(record)
+        if len(records) > 1:
+            return _matrix(records, model, validate, out_dir, seed, say, settings, noise, search)
+        record = records[0]
     base, baselines = _baseline(record, model, settings, say, noise, start)
     say(f"baseline {base.name}: MSE {base.mse:.4g}, ln Z {base.result.log_evidence:.6g}")
     before = residual_views(record, base.predicted)
@@ -184,6 +195,34 @@ def diagnose(
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return Diagnosis(out, fits)
+
+
+def _as_set(records) -> RecordSet:
+    """A RecordSet of ``records`` (a RecordSet, or a sequence of records without conditions)."""
+    if isinstance(records, RecordSet):
+        return records
+    records = tuple(records)
+    return RecordSet(records, ({},) * len(records), ("train",) * len(records), "", {})
+
+
+def _matrix(records: RecordSet, model, validate, out_dir, seed: int, say, settings: LSQSettings, noise: str,
+            search: Search) -> Diagnosis:
+    """The diagnosis of several records by one likelihood (:func:`.matrix.diagnose_matrix`); its held-out
+    conditions are its validation, so ``validate`` is refused; with ``out_dir``, ``diagnose.json``."""
+    if validate is not None:
+        raise ValueError("diagnose of several records validates on each held-out condition: give the validation "
+                         "record as one more record of the set instead of validate=")
+    if any(r.attrs["kind"] != "device" for r in records):
+        raise ValueError("diagnose of several records runs on device tests (force and displacement): the held-out "
+                         "gain is scored on the force of each test")
+    out = diagnose_matrix(records, model, settings=settings, seed=seed, noise=noise, say=say,
+                          names=search.candidates, threshold=search.threshold,
+                          max_effects=search.max_effects, forms=FORMS)
+    out["seed"] = seed
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
+    return Diagnosis(out, {})
 
 
 def _baseline(record: xr.Dataset, model, settings: LSQSettings, say, noise: str = "iid",

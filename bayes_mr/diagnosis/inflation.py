@@ -59,6 +59,8 @@ def design_effect(lik: OutputError, phi: np.ndarray, sigma: np.ndarray, idx: lis
     lam : ndarray (d,)
         The eigenvalues.
     """
+    if len(getattr(lik, "parts", ())) > 1:
+        return _joint_design_effect(lik, phi, sigma, idx)
     rf = Residuals(lik, sigma)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
@@ -70,6 +72,34 @@ def design_effect(lik: OutputError, phi: np.ndarray, sigma: np.ndarray, idx: lis
         B = J[:, base]
         G = G - B @ np.linalg.lstsq(B, G, rcond=None)[0]
     return design_effect_of(r.reshape(n, n_c), G.reshape(n, n_c, len(idx)))
+
+
+def _joint_design_effect(lik, phi: np.ndarray, sigma: np.ndarray, idx: list[int]) -> tuple[float, np.ndarray]:
+    """κ of a likelihood summed over independent records (:class:`~bayes_mr.likelihood.joint.JointLikelihood`).
+
+    The effect's sensitivities are made orthogonal to the shared base parameters over all records at once (the
+    base absorbs what it can of every record together); the iid and HAC covariances are each record's own,
+    summed — residuals are autocorrelated within a record, independent between records. ``sigma`` is every
+    record's σ_r in the joint order (R·C,).
+    """
+    n_c = len(lik.channels)
+    rs, js = [], []
+    for k, part in enumerate(lik.parts):
+        rf = Residuals(part, np.asarray(sigma, float)[k * n_c:(k + 1) * n_c])
+        rs.append(rf(phi))
+        js.append(rf.jacobian(phi, central=True))
+    J = np.vstack(js)
+    base = [j for j in range(J.shape[1]) if j not in idx]
+    G = J[:, idx]
+    if base:
+        B = J[:, base]
+        G = G - B @ np.linalg.lstsq(B, G, rcond=None)[0]
+    v_iid, v_hac, lo = np.zeros((len(idx), len(idx))), np.zeros((len(idx), len(idx))), 0
+    for r in rs:
+        n = r.size // n_c
+        a, b = covariances(r.reshape(n, n_c), G[lo:lo + r.size].reshape(n, n_c, len(idx)))
+        v_iid, v_hac, lo = v_iid + a, v_hac + b, lo + r.size
+    return _mean_eigenvalue(v_iid, v_hac)
 
 
 def design_effect_of(R: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray]:
@@ -90,6 +120,13 @@ def design_effect_of(R: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray]:
         Mean eigenvalue of V_iid⁻¹ V_HAC (1 for white residuals).
     lam : ndarray (d,)
     """
+    return _mean_eigenvalue(*covariances(R, G))
+
+
+def covariances(R: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(V_iid, V_HAC), each (d, d): the covariances of the score Σ_t G_t r_t, white and Bartlett-weighted.
+
+    Both are scaled by the record's length n (a sum over independent records adds them)."""
     n, n_c, d = G.shape
     lag = hac_bandwidth(R, max_lag=min(R.shape[0] // 4, 5000))
     m = 2 * n
@@ -104,7 +141,12 @@ def design_effect_of(R: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray]:
             for a in range(d):
                 for b in range(d):
                     v_hac[a, b] += np.sum(w * gamma * _lagged(G[:, c, a], G[:, c2, b], lag, m))
-    v_hac = 0.5 * (v_hac + v_hac.T)
+    return v_iid, 0.5 * (v_hac + v_hac.T)
+
+
+def _mean_eigenvalue(v_iid: np.ndarray, v_hac: np.ndarray) -> tuple[float, np.ndarray]:
+    """Mean eigenvalue of V_iid⁻¹ V_HAC and the eigenvalues (1 each where they cannot be had)."""
+    d = v_iid.shape[0]
     try:
         lam = np.linalg.eigvals(np.linalg.solve(v_iid, v_hac)).real
     except np.linalg.LinAlgError:

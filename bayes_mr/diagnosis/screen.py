@@ -158,7 +158,14 @@ def _num(v) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
+#: Current laws the screen leaves to ``compare``: on one record ``command_saturation`` stands for the family. The
+#: laws' g(u) differ in their curvature above the knee only, which one record's command range rarely tells apart
+#: (a tie, :mod:`.ranking`, at the cost of a command-path fit each); across a matrix of constant currents they are
+#: models to compare (``spencer+command_polynomial`` against ``spencer+exponential_saturation``).
+COMPARED_LAWS = ("command_polynomial", "exponential_saturation")
+
+
+def applicable(model: Model, record: xr.Dataset, command_varies: bool | None = None) -> list[Effect]:
     """Effects that can extend ``model`` on ``record``.
 
     Leaves out effects the model has or its form contains (``spencer``:
@@ -167,16 +174,17 @@ def applicable(model: Model, record: xr.Dataset) -> list[Effect]:
     varies (:func:`regime_range`), the command-path effects (``command_saturation``,
     ``field_dynamics``) on a model without a command path (they come in after
     ``voltage_dependence`` is named), device-only effects (``inertia``) on other
-    tests, and gives ``sensor_delay`` once per measured channel (structure test:
-    displacement and acceleration can each lag).
+    tests, the current laws of :data:`COMPARED_LAWS`, and gives ``sensor_delay`` once per measured channel (structure test:
+    displacement and acceleration can each lag). ``command_varies`` says whether the command varies where the record
+    alone cannot (a constant current that differs between the tests of a matrix); None: the record's voltage varies.
     """
     kind = record.attrs["kind"]
     have = {e.name for e in model.effects} | set(model.form.built_in)
     out = []
     for name, effect in EFFECTS.items():
-        if name in have:
+        if name in have or name in COMPARED_LAWS:
             continue
-        if effect.needs_voltage and not varying_voltage(record):
+        if effect.needs_voltage and not (varying_voltage(record) if command_varies is None else command_varies):
             continue
         if (name in ON_COMMAND and not model.commanded) or (name in DEVICE_ONLY and kind != "device"):
             continue

@@ -165,6 +165,17 @@ def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, 
     lag : int
         Bandwidth used [samples].
     """
+    omega, lag = hac_middle(J, r, n_t)
+    bread = np.linalg.pinv(J.T @ J)
+    return bread @ omega @ bread, lag
+
+
+def hac_middle(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, int]:
+    """The Bartlett-weighted middle Ω of :func:`hac_covariance` and its bandwidth [samples].
+
+    Independent records add their middles: the joint sandwich of several
+    records is (Σ JᵣᵀJᵣ)⁻¹ (Σ Ωᵣ) (Σ JᵣᵀJᵣ)⁻¹.
+    """
     p = J.shape[1]
     c = r.size // n_t
     g = (J * r[:, None]).reshape(n_t, c, p).sum(axis=1)  # score contribution of each sample
@@ -178,8 +189,7 @@ def hac_covariance(J: np.ndarray, r: np.ndarray, n_t: int) -> tuple[np.ndarray, 
             w = 1.0 - np.arange(lag + 1) / (lag + 1)
             val = cc[0] + np.sum(w[1:] * (cc[1: lag + 1] + cc[m - lag:][::-1]))
             omega[a, b] = omega[b, a] = val
-    bread = np.linalg.pinv(J.T @ J)
-    return bread @ omega @ bread, lag
+    return omega, lag
 
 
 def loewner_max(a: np.ndarray, b: np.ndarray, rtol: float = 1e-12) -> np.ndarray:

@@ -25,7 +25,9 @@ import xarray as xr
 from bayes_mr.execution.executor import job_executor
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.inference.base import Posterior, laplace_draws
-from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, fit_lsq, laplace, peak_from
+from bayes_mr.inference.lsq.joint import fit_any, laplace_any, peak_any
+from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.inference import calibrate
 from bayes_mr.inference.ukf import filter as ukf
 from bayes_mr.inference.lsq.evidence_scale import calibration_info
@@ -50,7 +52,7 @@ class LeastSquares:
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Optimum, Laplace draws (seeded by ``seed``) and Laplace evidence."""
-        return self.posterior(likelihood, fit_lsq(likelihood, self.settings), seed=seed)
+        return self.posterior(likelihood, fit_any(likelihood, self.settings), seed=seed)
 
     def posterior(self, lik: OutputError, res: LSQResult, *, seed: int = 0) -> Posterior:
         """The Laplace posterior of a least-squares optimum ``res`` of ``lik`` (draws seeded by ``seed``);
@@ -68,9 +70,9 @@ class LeastSquares:
              "cost": ("start", np.array([s["cost"] for s in res.starts])),
              "nfev": ("start", np.array([s["nfev"] for s in res.starts]))},
             coords={"param": list(coords.names)})
-        info = {"evidence_route": "laplace", "sigma": dict(zip(lik.channels, res.sigma)),
+        info = {"evidence_route": "laplace", "sigma": dict(zip(lik.noise_labels, res.sigma)),
                 "optimum": dict(zip(coords.names, point)), "hac_lag": res.hac_lag, "n_starts": len(res.starts),
-                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.channels),
+                "draws_clipped": n_clipped, "uncertainty": calibrate.describe(res, lik.noise_labels),
                 **calibration_info(res.evidence_terms)}
         return Posterior(engine=self.name, draws=coords.to_theta(draws_phi)[None], point=point, x_draws=x,
                          log_evidence=res.log_evidence, info=info,
@@ -111,7 +113,7 @@ class Emcee:
 
     def fit(self, likelihood: OutputError, *, seed: int = 0, progress: bool = True) -> Posterior:
         """Least squares (:meth:`lsq_settings`), then the chain from its optimum, then the evidence routes."""
-        return self.fit_from(likelihood, fit_lsq(likelihood, self.lsq_settings(seed)), seed=seed, progress=progress)
+        return self.fit_from(likelihood, fit_any(likelihood, self.lsq_settings(seed)), seed=seed, progress=progress)
 
     @staticmethod
     def lsq_settings(seed: int) -> LSQSettings:
@@ -215,33 +217,25 @@ class UKF:
         ValueError
             No run could be trained and validated (every prior diverged).
         """
+        from bayes_mr.inference.ukf.joint import filtered, validate_on_records
         from bayes_mr.inference.ukf.training import train
         from bayes_mr.inference.ukf.validation import best_run, validate_runs
 
-        training = train(likelihood, n_lhs=self.n_lhs, taus=self.taus, settings=self.settings, seed=seed,
-                         executor=self.executor, chunk_size=self.chunk_size, progress=progress)
+        # several records: filtered in turn, the parameters carried and the states reset (bayes_mr.inference.ukf.joint)
+        one, reset, records = filtered(likelihood)
+        if len(records) == 1:
+            likelihood = one  # a set of one record is that record
+        training = train(one, n_lhs=self.n_lhs, taus=self.taus, settings=self.settings, seed=seed,
+                         executor=self.executor, chunk_size=self.chunk_size, progress=progress, reset=reset)
         method = 1 if self.validate_on is None else 2
-        validation = validate_runs(training, likelihood.record if method == 1 else self.validate_on)
+        validation = validate_on_records(training, records) if method == 1 else validate_runs(training,
+                                                                                               self.validate_on)
         sel = best_run(training, validation)
         run = training.sel(run=sel)
         # further passes from the chosen run without its prior's transient (UKFSettings.refine_passes)
-        ref = ukf.refine(ukf.make_problem(likelihood, self.settings), run["final_phi"].values,
-                         run["final_cov_phi"].values, self.settings)
-        phi, cov = ref["phi"], ref["cov"]
-        # the filter's own Gaussian, widened by its offset from the likelihood's peak (UKF.peak_nfev)
-        uncertainty = {"covariance": "filter"}
-        if self.peak_nfev > 0:
-            peak = peak_from(likelihood, phi, self.peak_nfev)
-            delta = peak["delta"]
-            uncertainty.update(covariance="filter + offset to the likelihood's peak", peak_nfev=peak["nfev"],
-                               peak_offset_sd=float(np.sqrt(max(delta @ np.linalg.pinv(cov) @ delta, 0.0))))
-            cov = cov + np.outer(delta, delta)
-            if likelihood.kind == "device" and calibrate.input_noise_sd(likelihood):
-                # a device test feeds its measured (noisy) motion straight into the force: the filter tracks no
-                # state that could absorb that noise, so its covariance misses it (class docstring, peak_nfev)
-                floor = laplace(likelihood, peak["phi"]).cov_phi
-                cov = calibrate.loewner_max(cov, floor)
-                uncertainty["covariance"] += ", floored at least squares' calibrated covariance there"
+        ref = ukf.refine(ukf.make_problem(one, self.settings), run["final_phi"].values,
+                         run["final_cov_phi"].values, self.settings, reset=reset)
+        phi, cov, uncertainty = self._widened(likelihood, ref["phi"], ref["cov"])
         rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         # the same prior box as every engine's: a direction the record hardly sees is bounded by the prior,
         # not carried to exp(φ) = inf (lugre's ε in the coverage study)
@@ -271,6 +265,27 @@ class UKF:
             trained=int(training.attrs["trained"]), diverged=int(training.attrs["diverged"]),
             wall_s=float(training.attrs["wall_s"]) + ref["wall_s"],
         )
+
+
+    def _widened(self, likelihood, phi: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+        """The filter's Gaussian (φ, Cov φ) widened by its offset from the likelihood's peak (:attr:`peak_nfev`),
+        floored on a device test with input noise at least squares' calibrated covariance there; with the
+        fit JSON's ``uncertainty``. A joint likelihood's peak and covariance are those of its summed records."""
+        uncertainty = {"covariance": "filter"}
+        if self.peak_nfev <= 0:
+            return phi, cov, uncertainty
+        peak = peak_any(likelihood, phi, self.peak_nfev)
+        delta = peak["delta"]
+        uncertainty.update(covariance="filter + offset to the likelihood's peak", peak_nfev=peak["nfev"],
+                           peak_offset_sd=float(np.sqrt(max(delta @ np.linalg.pinv(cov) @ delta, 0.0))))
+        cov = cov + np.outer(delta, delta)
+        parts = likelihood.parts if isinstance(likelihood, JointLikelihood) else [likelihood]
+        if likelihood.kind == "device" and any(calibrate.input_noise_sd(p) for p in parts):
+            # a device test feeds its measured (noisy) motion straight into the force: the filter tracks no
+            # state that could absorb that noise, so its covariance misses it (class docstring, peak_nfev)
+            cov = calibrate.loewner_max(cov, laplace_any(likelihood, peak["phi"]).cov_phi)
+            uncertainty["covariance"] += ", floored at least squares' calibrated covariance there"
+        return phi, cov, uncertainty
 
 
 #: Engine name → estimator class (the ``--engine`` choices).

@@ -20,15 +20,20 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from bayes_mr.data.records import RecordSet
 from bayes_mr.inference import results
 from bayes_mr.inference.base import Estimator
 from bayes_mr.inference.estimators import UKF, Emcee, LeastSquares, engine
+from bayes_mr.inference.joint_results import build_any
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.scores.pooled import pooled
 from bayes_mr.models import Model, get_model
 from bayes_mr.scores import score
+from bayes_mr.scores.conditions import condition_row
 from bayes_mr.simulation.simulate import Inputs, simulate
 
-__all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate"]
+__all__ = ["UKF", "Emcee", "Identify", "LeastSquares", "engine", "predict", "validate", "validate_records"]
 
 
 def predict(model: Model | str, record: xr.Dataset, theta: dict[str, float],
@@ -92,16 +97,28 @@ class Identify:
     input_interp: str = "auto"
     command_interp: str = "auto"
 
-    def likelihood(self, record: xr.Dataset) -> OutputError:
-        """The binding of (model, record, noise model) every estimator consumes."""
-        return OutputError(get_model(self.model), record, ranges=self.ranges, fixed=self.fixed,
-                           residual=self.noise, input_interp=self.input_interp, command_interp=self.command_interp)
+    def likelihood(self, record: xr.Dataset | RecordSet | list) -> OutputError | JointLikelihood:
+        """The binding of (model, record, noise model) every estimator consumes.
 
-    def fit(self, record: xr.Dataset, *, seed: int = 0, progress: bool = True):
-        """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's."""
+        A record gives an :class:`OutputError`; several (a :class:`~bayes_mr.data.records.RecordSet`
+        or a list of records) one :class:`~bayes_mr.likelihood.joint.JointLikelihood` summed over them.
+        """
+        options = dict(ranges=self.ranges, fixed=self.fixed, residual=self.noise, input_interp=self.input_interp,
+                       command_interp=self.command_interp)
+        if isinstance(record, xr.Dataset):
+            return OutputError(get_model(self.model), record, **options)
+        return JointLikelihood(get_model(self.model), record, **options)  # a RecordSet keeps its conditions
+
+    def fit(self, record: xr.Dataset | RecordSet | list, *, seed: int = 0, progress: bool = True):
+        """Fit and return InferenceData (see :mod:`bayes_mr.inference.results`); ``wall_s`` is the whole fit's.
+
+        Several records (a RecordSet or a list) are fitted by one likelihood summed over them; the result
+        is :func:`~bayes_mr.inference.joint_results.build_joint`'s (one record's: exactly that record's fit).
+        """
         t0 = _time.perf_counter()
         lik = self.likelihood(record)
-        idata = results.build(lik, self.estimator.fit(lik, seed=seed, progress=progress))
+        post = self.estimator.fit(lik, seed=seed, progress=progress)
+        idata = build_any(lik, post)
         results.set_wall(idata, _time.perf_counter() - t0)
         return idata
 
@@ -129,6 +146,11 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         ``warmup_s`` and the new record's ``input_interp`` (its attribute,
         else from its drive's bandwidth) and ``command_interp`` (its attribute, else linear).
     """
+    return validated(idata, record, warmup)[0]
+
+
+def validated(idata, record: xr.Dataset, warmup: float) -> tuple[dict, dict[str, np.ndarray]]:
+    """:func:`validate`'s dict, and the prediction it scored (channel → array, on the record's samples)."""
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
         raise ValueError(f"the result is a {summary.kind} test, the record a {record.attrs['kind']} test")
@@ -139,7 +161,7 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
     inputs = Inputs.from_record(record)
     pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)},
                    inputs.interp, inputs.command_interp)
-    scores = score(_after(record, warmup), pred)
+    scores = score(after_warmup(record, warmup), pred)
     out = summary.to_dict()
     out.update(
         mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
@@ -149,11 +171,64 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
         log_evidence=None, validated_on=str(record.attrs.get("source", "")),
         trained_on=str(idata.posterior.attrs.get("source", "")),
     )
+    return out, pred
+
+
+def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -> dict:
+    """:func:`validate` on each of several records, and the scores pooled over them.
+
+    Returns
+    -------
+    dict
+        One record: :func:`validate`'s dict (from a RecordSet with ``records``: its file, role and
+        conditions). Several: the same keys with ``mse``, ``rmse``,
+        ``force_nrmse`` and the force errors pooled over every record's scored samples
+        (:func:`bayes_mr.scores.pooled.pooled`), ``masked`` and ``wall_s`` summed,
+        ``validated_on`` every file, and ``records`` (per record: ``file``, ``role``,
+        ``conditions`` and its own scores) and, where every record measures displacement and force,
+        ``by_condition`` (per record: ``record``, ``file``, ``role`` and the condition and scores of
+        :func:`bayes_mr.scores.conditions.condition_row`: amplitude, frequency, command, force NRMSE,
+        peak-force and energy-per-cycle errors).
+    """
+    recs = list(records)
+    done = [validated(idata, r, warmup) for r in recs]
+    each = [e for e, _ in done]
+    if len(each) == 1:  # a manifest's one record: its keys, and what the manifest says of it
+        return {**each[0], "records": records.describe()} if isinstance(records, RecordSet) else each[0]
+    scored = [after_warmup(r, warmup) for r in recs]
+    keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")
+    for e, r in zip(each, scored):
+        e["n"] = int(r["valid"].values.sum()) if "valid" in r else r.sizes["time"]
+    if any(e["mse"] is None for e in each):
+        total = dict.fromkeys(keys)
+    else:
+        total = pooled(scored, [{k: e[k] for k in keys + ("n",)} for e in each])
+    about = records.describe() if isinstance(records, RecordSet) else [
+        {"file": str(r.attrs.get("source", "")), "role": "test", "conditions": {}} for r in recs]
+    out = dict(each[0])
+    out.update({k: total[k] for k in keys if k in total}, masked=sum(e["masked"] for e in each),
+               wall_s=sum(e["wall_s"] for e in each), validated_on=[e["validated_on"] for e in each],
+               n_records=len(each), records=[{**a, **{k: e[k] for k in keys + ("masked", "n", "input_interp",
+                                                                                "command_interp")}}
+                                             for a, e in zip(about, each)])
+    if all("force" in r and "displacement" in r for r in recs):
+        out["by_condition"] = [{"record": i, "file": a["file"], "role": a["role"],
+                                **by_condition(r, pred["force"], records, i)}
+                               for i, (a, r, (_, pred)) in enumerate(zip(about, scored, done))]
     return out
 
 
-def _after(record: xr.Dataset, warmup: float) -> xr.Dataset:
-    """The record with samples in its first ``warmup`` seconds left out of every score (``valid`` False)."""
+def by_condition(record: xr.Dataset, force_hat: np.ndarray, records: RecordSet | list, i: int) -> dict:
+    """The table row of record ``i`` of a set (:func:`bayes_mr.scores.conditions.condition_row`): the manifest's
+    conditions and units where the set has them, the record's motion otherwise."""
+    if isinstance(records, RecordSet):
+        return condition_row(record, force_hat, conditions=records.conditions[i], units=records.units,
+                             source=records.source)
+    return condition_row(record, force_hat)
+
+
+def after_warmup(record: xr.Dataset, warmup: float) -> xr.Dataset:
+    """The record with samples in its first ``warmup`` seconds [s] left out of every score (``valid`` False)."""
     if warmup == 0:
         return record
     time = record["time"].values

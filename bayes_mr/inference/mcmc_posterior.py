@@ -65,7 +65,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     info = {
         "evidence_route": chosen.route if chosen is not None else None,
         "evidence_routes": {k: e.to_dict() for k, e in routes.items()},
-        "sigma": dict(zip(lik.channels, sigma)), "map": dict(zip(coords.names, point)),
+        "sigma": dict(zip(lik.noise_labels, sigma)), "map": dict(zip(coords.names, point)),
         "n_steps": result.n_steps, "n_walkers": result.n_walkers, "burn": result.burn, "thin": result.thin,
         "tau_max": float(np.max(result.tau)), "rhat_max": float(np.max(result.rhat)),
         "ess_min": float(np.min(result.ess)), "acceptance": float(np.mean(result.acceptance)),
@@ -80,7 +80,7 @@ def mcmc_posterior(lik, result: MCMCResult, lsq=None, *, evidence=None, n_ll_dra
     }
     if lsq is not None:
         info["lsq_optimum"] = dict(lsq.theta)
-        info["uncertainty"] = {**describe(lsq, lik.channels), "draws_outside_prior": outside,
+        info["uncertainty"] = {**describe(lsq, lik.noise_labels), "draws_outside_prior": outside,
                                "draws": "mapped to least squares' covariance" if outside < 1.0 else
                                "the chain's own (every mapped draw left the prior box)"}
         info.update(calibration_info(lsq.evidence_terms))  # the Laplace route's calibrated evidence (evidence_scale)

@@ -215,7 +215,7 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
         scores = score(record, {k: v[0] for k, v in sim.outputs.items()}, noise_sd=noise_sd)
     else:  # e.g. a UKF run chosen on another record that is unstable on this one: report, don't fail
         scores = {"mse": None, "force_errors": None, "force_nrmse": None, "rmse": None}
-    info = dict(post.info, **_noise_info(lik, post, sim))
+    info = dict(post.info, **noise_info(lik, post, sim))
     # the free parameters and the model's derived ones (spencer's x0 = F_pre/k1), draw by draw
     names, units, draws = lik.model.reported(lik.kind, names, units, post.draws, lik.par.full_theta(post.draws))
     point = lik.model.reported(lik.kind, lik.par.names, (), post.point, lik.par.full_theta(post.point))[2]
@@ -236,7 +236,7 @@ def build(lik: OutputError, post: Posterior, *, noise_sd: dict[str, float] | Non
                                log_likelihood=ll, ll_index=ll_index, predictive=predictive_draws(lik, post))
 
 
-def _noise_info(lik: OutputError, post: Posterior, sim) -> dict:
+def noise_info(lik: OutputError, post: Posterior, sim) -> dict:
     """``noise_model``, ``n_eff`` (and ``ar_coef``, ``evidence_note``) of a fit, at its point estimate.
 
     An engine that did not choose the AR orders (the UKF) has them chosen here
@@ -336,16 +336,19 @@ def _sample_stats_group(post: Posterior) -> xr.Dataset | None:
 def _record_groups(record: xr.Dataset) -> dict[str, xr.Dataset]:
     """``observed_data`` (measured channels) and ``constant_data`` (inputs, ``valid``) of a record."""
     time = record["time"].values
+    coords = {"time": time}
+    if "record" in record.coords:  # several records one after another (bayes_mr.inference.joint_results)
+        coords["record"] = ("time", record["record"].values)
     channels = list(dict.fromkeys(c for c in OUTPUTS[record.attrs["kind"]] + ("force",) if c in record))
     observed = xr.Dataset(
         {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in channels},
-        coords={"time": time},
+        coords=coords,
     )
     inputs = [c for c in ("ground_acceleration", "displacement", "velocity", "voltage") if c in record]
     const = {c: ("time", record[c].values, {"units": record[c].attrs.get("units", "")}) for c in inputs}
     const["valid"] = ("time", record["valid"].values.astype(np.int8) if "valid" in record
                       else np.ones(time.size, np.int8))
-    return {"observed_data": observed, "constant_data": xr.Dataset(const, coords={"time": time})}
+    return {"observed_data": observed, "constant_data": xr.Dataset(const, coords=coords)}
 
 
 def make_inference_data(summary: FitSummary, post: Posterior, names: tuple[str, ...], units: tuple[str, ...],

@@ -300,6 +300,11 @@ class OutputError:
         return self.n_params + (len(self.channels) if self.noise == "sampled" else 0)
 
     @property
+    def noise_labels(self) -> tuple[str, ...]:
+        """The noise SDs' labels in x's order: the measured channels."""
+        return tuple(self.channels)
+
+    @property
     def names(self) -> tuple[str, ...]:
         extra = tuple(f"sigma_{c}" for c in self.channels) if self.noise == "sampled" else ()
         return self.par.names + extra

@@ -34,10 +34,14 @@ constant's comment; equations in ``docs/CONTRACT.md``):
 * ``inertia`` — piston and fluid inertia m_e·ẍ in the force a device test
   measures (device tests only);
 * ``field_decay`` — the field decays at its own rate: the command-to-field lag
-  runs at r_d·η while the field's magnitude falls, at η while it rises.
+  runs at r_d·η while the field's magnitude falls, at η while it rises;
+* ``command_polynomial`` — a current law cubic in the command: u enters the
+  field-dependent coefficients as u·(1 + b2·u + b3·u²);
+* ``exponential_saturation`` — a first-order saturation of the field with the
+  command: u enters them as sgn(u)·u_e·(1 − e^{−|u|/u_e}).
 
-``command_saturation``, ``field_dynamics`` and ``field_decay`` act on a command path: the
-model must have one (``spencer``, or ``+voltage_dependence``), which
+``command_saturation``, ``field_dynamics``, ``field_decay`` and the current laws act on a command
+path: the model must have one (``spencer``, or ``+voltage_dependence``), which
 :meth:`~bayes_mr.models.model.Model.param_specs` checks.
 """
 
@@ -221,6 +225,44 @@ FIELD_DECAY = Effect(
     needs_voltage=True,
 )
 
+# Current laws beside the linear one of Spencer et al. 1997 (α, c0, c1 linear in the filtered command u).
+# Each maps u to g(u), which every field-dependent coefficient then sees in place of u (as
+# command_saturation's tanh does): it is the field that is nonlinear in the current, so one shape serves
+# the yield force and the field-induced viscous terms alike. Identified across the currents of a test
+# matrix: a record at one constant current sees only g at that current, the product of the gain and the
+# shape (bayes_mr.likelihood.joint sums the records that separate them).
+#
+# Yang, Spencer, Carlson & Sain 2002 ("Large-scale MR fluid dampers: modeling and dynamic performance
+# considerations", Eng. Struct. 24:309–323) fitted α, c0 and c1 of a 20-t damper as cubic polynomials of
+# the coil current. Here α_a + α_b·u becomes α_a + α_b·u·(1 + b2·u + b3·u²): a cubic in u through the
+# zero-current level; b2 = b3 = 0 is the linear law (the off value). A cubic's three coefficients above
+# the zero-current level need three non-zero currents.
+COMMAND_POLYNOMIAL = Effect(
+    "command_polynomial", "the field-dependent coefficients are cubic in the command: u enters them as "
+                          "u·(1 + b2·u + b3·u²)",
+    (
+        _zero_centred("b2", "1/V", "quadratic coefficient of the current law (1/A for a current command)",
+                      (0, 0, 0, 0), 3.0),
+        _zero_centred("b3", "1/V²", "cubic coefficient of the current law (1/A² for a current command)",
+                      (0, 0, 0, 0), 3.0),
+    ),
+    needs_voltage=True,
+)
+# A first-order saturation: the yield stress of an MR fluid stops growing with the field as the particles'
+# magnetisation saturates (Ginder, Davis & Elie 1996, "Magnetorheological fluids: scaling of the yield
+# stress", Int. J. Mod. Phys. B 10:3293–3303), so a damper's force flattens at high current. The first-order
+# (exponential) approach is the simplest law that rises with slope 1 at u = 0 like the linear one and
+# flattens at the command scale u_e; its knee is softer than command_saturation's tanh (g = u − u²/(2u_e) + …
+# against u − u³/(3u_s²) + …): the two differ in how early the gain falls, which a matrix of three or more
+# currents tells apart. The off value is u_e → ∞.
+EXPONENTIAL_SATURATION = Effect(
+    "exponential_saturation", "the field saturates with the command at first order: u enters every "
+                              "field-dependent coefficient as sgn(u)·u_e·(1 − e^{−|u|/u_e})",
+    (ParamSpec("u_e", "V", "command scale of the first-order saturation (A for a current command)", 2.0,
+               (0, 0, 0, 0), (0.05, 20.0)),),
+    needs_voltage=True,
+)
+
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -238,10 +280,12 @@ EFFECTS: dict[str, Effect] = {
         STRIBECK_FRICTION,
         INERTIA,
         FIELD_DECAY,
+        COMMAND_POLYNOMIAL,
+        EXPONENTIAL_SATURATION,
     )
 }
 #: Effects that act on a command path (a form that has one, or ``voltage_dependence``).
-ON_COMMAND = ("command_saturation", "field_dynamics", "field_decay")
+ON_COMMAND = ("command_saturation", "field_dynamics", "field_decay", "command_polynomial", "exponential_saturation")
 #: Effects only a device test can have, and why.
 DEVICE_ONLY = {"inertia": "the force of a structure or forced test is not measured at the damper; "
                           "the moving mass there is part of the storey (or forced) mass"}

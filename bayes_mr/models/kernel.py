@@ -65,7 +65,9 @@ L_TP = L_FDEC + 1  # index in p of term j's θ_j, L_TP..L_TP+N_TERMS-1, -1 = unu
 N_TERMS = 3
 L_TC = L_TP + N_TERMS  # code of term j's basis and target (TERM_* below)
 L_SUL = L_TC + N_TERMS  # state index of the lagged command (spencer's or voltage_dependence's u), -1 = none
-LAYOUT_SIZE = L_SUL + 1
+L_CPOLY = L_SUL + 1  # command_polynomial: b2, b3
+L_CEXP = L_SUL + 2  # exponential_saturation: u_e
+LAYOUT_SIZE = L_SUL + 3
 
 # --- constants (float64 array) ----------------------------------------------
 K_MASS = 0  # storey mass [kg] (structure tests)
@@ -93,11 +95,22 @@ def _sgn(v):
 
 @hot(inline="always")
 def _saturate(lay, p, u):
-    """The command as the field-dependent coefficients see it: u_s·tanh(u/u_s) with command_saturation, else u."""
-    if lay[L_CSAT] < 0:
-        return u
-    us = p[lay[L_CSAT]]
-    return us * math.tanh(u / us)
+    """The command as the field-dependent coefficients see it, g(u): the current law.
+
+    u itself (the linear law of Spencer et al. 1997) unless shaped, in this order, by
+    command_polynomial (u·(1 + b2·u + b3·u²)), command_saturation (u_s·tanh(u/u_s)) and
+    exponential_saturation (sgn(u)·u_e·(1 − e^{−|u|/u_e})).
+    """
+    if lay[L_CPOLY] >= 0:
+        j = lay[L_CPOLY]
+        u = u * (1.0 + p[j] * u + p[j + 1] * u * u)
+    if lay[L_CSAT] >= 0:
+        us = p[lay[L_CSAT]]
+        u = us * math.tanh(u / us)
+    if lay[L_CEXP] >= 0:
+        ue = p[lay[L_CEXP]]
+        u = _sgn(u) * ue * (1.0 - math.exp(-abs(u) / ue))
+    return u
 
 
 @hot(inline="always")

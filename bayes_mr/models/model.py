@@ -385,6 +385,8 @@ class Model:
             "shear_thinning": kernel.L_ST,
             "stribeck_friction": kernel.L_SF,
             "field_decay": kernel.L_FDEC,
+            "command_polynomial": kernel.L_CPOLY,
+            "exponential_saturation": kernel.L_CEXP,
         }
         for e in self.effects:
             if e.name in slot:

@@ -217,3 +217,85 @@ def bars(panels: dict[str, dict[str, float | None]], *, title: str = "", highlig
     fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def _levels(values: list[float], tolerance: float = 0.1) -> tuple[list[float], list[int]]:
+    """Nominal levels of a test matrix's conditions, and the level of each value.
+
+    Amplitudes and frequencies estimated from records scatter about the nominal level
+    they were run at (noise widens a peak-to-peak by a few per cent): sorted values
+    within ``tolerance`` (relative) of the previous one share a level, labelled by
+    its median.
+    """
+    order = np.argsort(values)
+    groups: list[list[int]] = []
+    for i in order:
+        if groups and abs(values[i] - values[groups[-1][-1]]) <= tolerance * abs(values[groups[-1][-1]]):
+            groups[-1].append(int(i))
+        else:
+            groups.append([int(i)])
+    index = [0] * len(values)
+    for g, members in enumerate(groups):
+        for i in members:
+            index[i] = g
+    return [float(np.median([values[i] for i in members])) for members in groups], index
+
+
+def condition_map(rows: list[dict], *, value: str = "force_nrmse", label: str = "force NRMSE [-]",
+                  title: str = "") -> Figure:
+    """A heat map of a score by test condition: amplitude × frequency, one panel per constant command.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per test, with ``amplitude`` [m], ``frequency`` [Hz], ``command`` (``current``, ``voltage``
+        or None), ``command_value`` [A or V] and the score ``value`` (the rows of ``validate``'s
+        ``by_condition`` or of a leave-one-condition-out ``table``).
+    value : str
+        The key of the score coloured and printed in each cell.
+    label : str
+        The colour bar's label, with its unit.
+    title : str
+        The figure's title.
+
+    Returns
+    -------
+    Figure
+        Cells coloured on one scale across panels (from 0 to the largest score), the score printed in
+        each; a condition not tested is left blank. Amplitudes [mm] and frequencies [Hz] within 10 % of
+        each other share a level (:func:`_levels`), labelled by its median; of repeats of one cell the
+        last one shows.
+    """
+    def cmd(r):
+        return (r.get("command") or "", r.get("command_value"))
+
+    panels = sorted({cmd(r) for r in rows}, key=lambda c: (c[0], -np.inf if c[1] is None else c[1]))
+    amps, amp_of = _levels([1e3 * r["amplitude"] for r in rows])
+    freqs, freq_of = _levels([r["frequency"] for r in rows])
+    scores = [r[value] for r in rows if r.get(value) is not None]
+    vmax = max(scores) if scores else 1.0
+    fig = Figure(figsize=(1.6 + (0.8 * len(freqs) + 1.0) * len(panels), 1.6 + 0.55 * len(amps)),
+                 layout="constrained")  # room for the panel titles, the colour bar and the title
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False)
+    for ax, panel in zip(axes[0], panels):
+        grid = np.full((len(amps), len(freqs)), np.nan)
+        for k, r in enumerate(rows):
+            if cmd(r) == panel and r.get(value) is not None:
+                grid[amp_of[k], freq_of[k]] = r[value]
+        image = ax.imshow(grid, origin="lower", cmap="viridis", vmin=0.0, vmax=vmax, aspect="auto")
+        for (i, j), v in np.ndenumerate(grid):
+            if np.isfinite(v):  # dark text on the light end of the scale, light text on the dark end
+                ax.text(j, i, f"{v:.3f}", ha="center", va="center", fontsize=8,
+                        color="k" if v > 0.6 * vmax else "w")
+        ax.set_xticks(range(len(freqs)), [f"{f:.3g}" for f in freqs])
+        ax.set_yticks(range(len(amps)), [f"{a:.3g}" for a in amps])
+        ax.set_xlabel("frequency [Hz]")
+        name, level = panel
+        unit = {"current": "A", "voltage": "V"}.get(name, "")
+        ax.set_title(f"{name} {level:g} {unit}" if level is not None else (f"{name} varying" if name
+                                                                               else "no command"), fontsize=9)
+    axes[0, 0].set_ylabel("displacement amplitude [mm]")
+    fig.colorbar(image, ax=list(axes[0]), label=label, shrink=0.9)
+    fig.suptitle(title)
+    return fig

@@ -130,14 +130,16 @@ def compare(
 
     Parameters
     ----------
-    record : xarray.Dataset
-        The record (package schema; masked samples are left out everywhere).
+    record : xarray.Dataset, RecordSet or list of records
+        The record (package schema; masked samples are left out everywhere), or several records of one
+        device fitted by one likelihood summed over them (:class:`~bayes_mr.likelihood.joint.JointLikelihood`;
+        the UKF rows then fail: the filter runs on one record).
     models : sequence of str
         Model names, e.g. ``["dahl", "lugre+force_offset"]``.
     engines : sequence of str
         ``lsq``, ``mcmc``, ``ukf``.
-    validate : xarray.Dataset, optional
-        Another record of the same kind (thesis method 2).
+    validate : xarray.Dataset or RecordSet, optional
+        Another record of the same kind (thesis method 2), or several (scores pooled over them, and each one's).
     seed : int
     progress : bool or callable
     out_dir : path, optional
@@ -180,14 +182,26 @@ def compare(
 
     cross = {m: crosscheck(fits[(m, "ukf")], fits[(m, "mcmc")])
              for m in models if (m, "ukf") in fits and (m, "mcmc") in fits}
-    inputs = Inputs.from_record(record)
-    out = {"rows": rows, **choose(rows, models, force), "crosscheck": cross,
-           "record": str(record.attrs.get("source", "")),
-           "masked": int((~record["valid"].values.astype(bool)).sum()) if "valid" in record else 0,
-           "input_interp": inputs.interp, "command_interp": inputs.command_interp}
+    out = {"rows": rows, **choose(rows, models, force), "crosscheck": cross, **_about(record)}
     if out_dir is not None:
         table(out).to_csv(Path(out_dir) / "compare.csv", index=False)
     return Comparison(out, fits)
+
+
+def _about(record) -> dict:
+    """The comparison's ``record``, ``masked``, ``input_interp`` and ``command_interp``; for several records
+    the files joined by "; ", the masked samples summed, the first record's interpolation, and ``records``
+    (per record: ``file``, ``role``, ``conditions``, ``masked``)."""
+    several = [record] if isinstance(record, xr.Dataset) else list(record)
+    inputs = Inputs.from_record(several[0])
+    masked = [int((~r["valid"].values.astype(bool)).sum()) if "valid" in r else 0 for r in several]
+    out = {"record": "; ".join(str(r.attrs.get("source", "")) for r in several), "masked": sum(masked),
+           "input_interp": inputs.interp, "command_interp": inputs.command_interp}
+    if not isinstance(record, xr.Dataset):
+        about = record.describe() if hasattr(record, "describe") else [
+            {"file": str(r.attrs.get("source", "")), "role": "train", "conditions": {}} for r in several]
+        out["records"] = [{**a, "masked": m} for a, m in zip(about, masked)]
+    return out
 
 
 def choose(rows: list[dict], models: Sequence[str], force: bool = False) -> dict:

@@ -16,9 +16,13 @@ from bayes_mr.inference import results
 from bayes_mr.execution.executor import Outcome
 from bayes_mr.inference.identify import Identify
 from bayes_mr.inference.identify import validate as validate_fit
+from bayes_mr.inference.identify import validate_records
 from bayes_mr.inference.mcmc.budget import over_budget
 from bayes_mr.inference.estimators import Emcee, LeastSquares, engine
+from bayes_mr.inference.joint_results import build_any
+from bayes_mr.inference.lsq.joint import fit_joint
 from bayes_mr.inference.lsq.least_squares import LSQResult, fit_lsq
+from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
 
@@ -83,14 +87,15 @@ def shares_lsq(lsq, mcmc, seed: int) -> bool:
 def free_parameters(model: str, record: xr.Dataset) -> int:
     """Parameters of ``model`` on ``record``'s kind of test: a fit's cost grows with them (the ``cost`` by which a
     grid on an executor starts its longest jobs first, :func:`bayes_mr.execution.executor.run_jobs`)."""
-    return len(get_model(model).param_names(record.attrs["kind"]))
+    kind = record.attrs["kind"] if isinstance(record, xr.Dataset) else record[0].attrs["kind"]  # or several records
+    return len(get_model(model).param_names(kind))
 
 
 def least_squares(model: str, lsq, record: xr.Dataset, noise: str = "iid") -> tuple[OutputError, LSQResult]:
     """The likelihood of ``model`` on ``record`` and its least-squares fit: what a model's ``lsq`` row and its
     chain share (:func:`lsq_mcmc_job`). Raises what the fit raises (:data:`FIT_ERRORS`)."""
     lik = Identify(model, lsq, noise=noise).likelihood(record)
-    return lik, fit_lsq(lik, lsq.settings)
+    return lik, (fit_joint if isinstance(lik, JointLikelihood) else fit_lsq)(lik, lsq.settings)
 
 
 def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset | None, seed: int,
@@ -125,7 +130,7 @@ def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset
             continue
         t1 = _time.perf_counter()
         try:
-            idata = results.build(lik, fit())
+            idata = build_any(lik, fit())
         except FIT_ERRORS as exc:
             out.append(_failed(model, est.name, _why(exc), t_lsq + _time.perf_counter() - t1))
             continue
@@ -138,14 +143,20 @@ def lsq_mcmc_job(model: str, lsq, mcmc, record: xr.Dataset, validate: xr.Dataset
 VALIDATION_KEYS = ("mse", "force_errors", "force_nrmse", "rmse", "masked")
 
 
-def validation_scores(idata, record: xr.Dataset) -> dict:
+def validation_scores(idata, record) -> dict:
     """A fit's prediction of another record (thesis method 2, :func:`bayes_mr.inference.identify.validate`):
-    :data:`VALIDATION_KEYS`, or ``error`` when it cannot predict it (another kind of test, a divergence)."""
+    :data:`VALIDATION_KEYS`, or ``error`` when it cannot predict it (another kind of test, a divergence).
+
+    Several records (a manifest's test rows): the scores pooled over them and ``records``, each one's
+    (:func:`bayes_mr.inference.identify.validate_records`)."""
     try:
-        v = validate_fit(idata, record)
+        if isinstance(record, xr.Dataset):
+            v = validate_fit(idata, record)
+        else:
+            v = validate_records(idata, record)
     except (RuntimeError, ValueError) as exc:
         return {"error": str(exc)}
-    return {k: v[k] for k in VALIDATION_KEYS}
+    return {k: v[k] for k in VALIDATION_KEYS + ("records",) if k in v}
 
 
 def units(pairs: list[tuple[str, str]], estimators: dict, seed: int) -> list[tuple[str, list[tuple[str, object]]]]:

@@ -33,6 +33,7 @@ import xarray as xr
 from bayes_mr.data import load as read_record
 from bayes_mr.data import write_record
 from bayes_mr.data.checks import NC_SUFFIXES, file_suffix
+from bayes_mr.data.records import is_manifest, load_records
 from bayes_mr.diagnosis.result import Diagnosis
 from bayes_mr.inference import results
 from bayes_mr.selection.result import Comparison
@@ -84,7 +85,15 @@ def load(path: str | os.PathLike, *args, **kwargs):
     (:func:`~bayes_mr.inference.results.load_result`); a ``.json`` is a
     Comparison (``rows``, ``selected``) or a Diagnosis (``baseline``, ``cause``),
     with the InferenceData :func:`save` wrote beside it. Those take no options.
+
+    Several records — a list of paths, or a manifest CSV (a ``file`` column, per-file
+    conditions such as ``current [A]``, optional ``role``) — are read with the same options
+    into a :class:`~bayes_mr.data.records.RecordSet` (:func:`~bayes_mr.data.records.load_records`;
+    ``constants={"current": 0.5}`` gives every file a condition), which ``Identify.fit``,
+    ``compare`` and ``validate_records`` take.
     """
+    if not isinstance(path, (str, os.PathLike)) or is_manifest(path):
+        return load_records(path, *args, **kwargs)
     what = _what(Path(path))
     if what == "record":
         return read_record(path, *args, **kwargs)

@@ -227,11 +227,12 @@ def evidence_routes(
         ``{"laplace": Evidence, "ti": Evidence, "ss": Evidence}`` (and ``"tmcmc"``); the one to
         select with is :func:`select_route` of it.
     """
-    from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+    from bayes_mr.inference.lsq.joint import fit_any
+    from bayes_mr.inference.lsq.least_squares import LSQSettings
     from bayes_mr.inference.mcmc.sampler import fit_mcmc
 
     if lsq is None:
-        lsq = fit_lsq(lik, LSQSettings(seed=seed))
+        lsq = fit_any(lik, LSQSettings(seed=seed))
     if posterior is None:
         posterior = fit_mcmc(lik, lsq=lsq, settings=mcmc_settings or MCMCSettings(seed=seed))
     ladder = run_ladder(lik, posterior, path=path, betas=betas, settings=ladder_settings, seed=seed,

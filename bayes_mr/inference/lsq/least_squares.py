@@ -69,7 +69,8 @@ from bayes_mr.inference.calibrate import hac_covariance
 from bayes_mr.inference.lsq.refine import Residuals, refine, standardised
 from bayes_mr.inference.lsq.subfit import screen
 
-__all__ = ["LSQResult", "LSQSettings", "WHITE_P", "fit_lsq", "laplace", "peak_from", "posterior_log_volume"]
+__all__ = ["LSQResult", "LSQSettings", "WHITE_P", "fit_lsq", "laplace", "ml_sd", "peak_from", "posterior_log_volume",
+           "search"]
 
 #: Ljung–Box p-value above which a whitened residual counts as white (no HAC sandwich needed).
 WHITE_P = 0.01
@@ -187,7 +188,7 @@ def peak_from(lik: OutputError, phi0: np.ndarray, max_nfev: int) -> dict:
     """
     phi0 = np.asarray(phi0, float)
     yhat, sim = lik.predict(phi0)  # one simulation for σ and the starting cost
-    sd = _ml_sd(lik, yhat[0]) if lik.noise == "sampled" else np.asarray(lik.noise_sd, float)
+    sd = ml_sd(lik, yhat[0]) if lik.noise == "sampled" else np.asarray(lik.noise_sd, float)
     r0 = standardised(lik, yhat[0], sd)
     cost0 = 0.5 * float(np.sum(r0**2)) if sim.ok[0] and np.all(np.isfinite(r0)) else math.inf
     res = refine(lik, phi0, sd, max_nfev)
@@ -213,27 +214,36 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
     """
     t0 = _time.perf_counter()
     say = progress or (lambda msg: None)
-    n = lik.y.shape[0]
+    phi, runs = search(lik, settings, say)
     sd = lik.noise_sd.copy()
-    if settings.head_samples is None or n <= settings.head_samples:
-        runs = _search(lik, settings, say, settings.max_nfev)
-        phi = min(runs, key=lambda r: r["cost"])["phi"]
-    else:
-        # the starts race on the head (an eighth of the evaluations each, then the better half twice as many, …)
-        head = _head(lik, settings.head_samples)
-        runs = _search(head, settings, say, max(settings.max_nfev // 8, 1), race=True)
-        phi = refine(lik, min(runs, key=lambda r: r["cost"])["phi"], sd, settings.max_nfev,
-                     exact=settings.exact_jacobian).x
-        say(f"best start (raced on the first {settings.head_samples} samples) refined on all {n}")
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
         yhat, _ = lik.predict(phi)
-        sd = _ml_sd(lik, yhat[0])
+        sd = ml_sd(lik, yhat[0])
         res = refine(lik, phi, sd, settings.max_nfev, exact=settings.exact_jacobian)
         phi = res.x
     return laplace(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
                    replicas=settings.input_noise_replicas, exact=settings.exact_jacobian)
+
+
+def search(lik: OutputError, settings: LSQSettings, say) -> tuple[np.ndarray, list[dict]]:
+    """Steps 1–2 of the module docstring: the best start refined with the first-pass weights, and every start.
+
+    On a record longer than ``settings.head_samples`` the starts race on its head and the winner is
+    refined on the whole record. ``say`` is called with a short text after each stage.
+    """
+    n = lik.y.shape[0]
+    if settings.head_samples is None or n <= settings.head_samples:
+        runs = _search(lik, settings, say, settings.max_nfev)
+        return min(runs, key=lambda r: r["cost"])["phi"], runs
+    # the starts race on the head (an eighth of the evaluations each, then the better half twice as many, …)
+    head = _head(lik, settings.head_samples)
+    runs = _search(head, settings, say, max(settings.max_nfev // 8, 1), race=True)
+    phi = refine(lik, min(runs, key=lambda r: r["cost"])["phi"], lik.noise_sd.copy(), settings.max_nfev,
+                 exact=settings.exact_jacobian).x
+    say(f"best start (raced on the first {settings.head_samples} samples) refined on all {n}")
+    return phi, runs
 
 
 def _head(lik: OutputError, n: int) -> OutputError:
@@ -272,7 +282,7 @@ def _search(lik: OutputError, settings: LSQSettings, say, max_nfev: int, race: b
     return runs
 
 
-def _ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:
+def ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:
     """Maximum-likelihood σ_c at a prediction (N, C): the residual RMS, under AR the innovation RMS.
 
     Floored at 1e-12 of each channel's SD, so that a perfect fit still weights its residuals."""
@@ -284,7 +294,7 @@ def _ml_sd(lik: OutputError, yhat: np.ndarray) -> np.ndarray:
     return np.maximum(sd, 1e-12 * np.std(lik.y[lik.valid], axis=0))
 
 
-def _ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[float, float, np.ndarray, float]:
+def ar_terms(lik: OutputError, yhat: np.ndarray, sigma: np.ndarray) -> tuple[float, float, np.ndarray, float]:
     """Under the AR model: (ln p(y|φ̂,σ̂), the AR coefficients' Laplace factor, the terms per channel,
     the smallest Ljung–Box p-value of the channels' whitened residuals)."""
     orders = lik.residual.orders
@@ -330,7 +340,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     if ar:
         lik.choose_residual_orders(phi)
     # sampled: σ_c at its maximum-likelihood value, the residual (under AR: innovation) RMS
-    sigma = _ml_sd(lik, yhat[0]) if sampled else np.asarray(lik.noise_sd, float)
+    sigma = ml_sd(lik, yhat[0]) if sampled else np.asarray(lik.noise_sd, float)
     rf = Residuals(lik, sigma, exact=exact)
     r = rf(phi)
     J = rf.jacobian(phi, central=True)
@@ -338,7 +348,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     cov_iid = np.linalg.pinv(JtJ)
     p_white, occam, n_terms = None, 0.0, np.full(sigma.size, n_c)
     if ar:
-        loglik, occam, n_terms, p_white = _ar_terms(lik, yhat[0], sigma)
+        loglik, occam, n_terms, p_white = ar_terms(lik, yhat[0], sigma)
     else:
         loglik = float(np.sum(-0.5 * (resid / sigma) ** 2 - np.log(sigma) - 0.5 * math.log(2 * math.pi)))
     if ar and p_white >= WHITE_P:

@@ -166,7 +166,8 @@ class Stall:
 
 
 def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
-           cap: int | None = None, stall: Stall | None = None, exact: bool = True) -> optimize.OptimizeResult:
+           cap: int | None = None, stall: Stall | None = None, exact: bool = True,
+           residuals=None) -> optimize.OptimizeResult:
     """Bounded trust-region least squares (scipy's ``trf``, ``x_scale="jac"``) of :class:`Residuals` from φ₀.
 
     Parameters
@@ -184,13 +185,17 @@ def refine(lik: OutputError, phi0: np.ndarray, sd: np.ndarray, max_nfev: int,
         Stop early on a crawl (:class:`Stall`); None: only scipy's tolerances and ``max_nfev`` stop it.
     exact : bool
         Exact Jacobians where the model has sensitivities (:class:`Residuals`); False: finite differences.
+    residuals : object, optional
+        The residual vector and its Jacobian (``__call__``, ``jacobian``) in place of
+        :class:`Residuals` of ``lik`` (a joint fit's, over several records); ``sd``, ``cap`` and ``exact`` are
+        then its own.
 
     Returns
     -------
     scipy.optimize.OptimizeResult
         ``x`` the refined φ, ``cost`` ½Σr² there, ``nfev``, ``status`` (:data:`STALLED`: stopped by ``stall``).
     """
-    res_fn = Residuals(lik, sd, cap, exact)
+    res_fn = residuals if residuals is not None else Residuals(lik, sd, cap, exact)
     lo, hi = lik.phi_lo, lik.phi_hi
     x0 = np.clip(phi0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     return optimize.least_squares(

@@ -143,8 +143,9 @@ def fit_mcmc(lik, *, lsq=None, settings: MCMCSettings = MCMCSettings(), lsq_sett
         ``sigma_<channel>`` holding ln σ_c).
     """
     if lsq is None:
-        from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+        from bayes_mr.inference.lsq.joint import fit_any
+        from bayes_mr.inference.lsq.least_squares import LSQSettings
 
-        lsq = fit_lsq(lik, lsq_settings or LSQSettings(seed=settings.seed))
+        lsq = fit_any(lik, lsq_settings or LSQSettings(seed=settings.seed))
     center, cov = start_from_lsq(lik, lsq)
     return sample(lik, center, cov, settings, names=lik.names, bounds=(lik.lower, lik.upper))

@@ -330,7 +330,8 @@ def filter_states(
     return dict(states=states, mean=m, cov=P, info=info)
 
 
-def refine(problem: Problem, phi: np.ndarray, cov: np.ndarray, settings: UKFSettings) -> dict:
+def refine(problem: Problem, phi: np.ndarray, cov: np.ndarray, settings: UKFSettings, *,
+           reset: np.ndarray | None = None) -> dict:
     """The chosen run refined by ``settings.refine_passes`` further passes (see :class:`UKFSettings`).
 
     Parameters
@@ -339,6 +340,8 @@ def refine(problem: Problem, phi: np.ndarray, cov: np.ndarray, settings: UKFSett
         Final mean of the chosen run [φ].
     cov : ndarray, shape (p, p)
         Its final covariance [φ²].
+    reset : ndarray of bool, shape (N,), optional
+        Samples that start another record (several records filtered in turn, :func:`run_priors`).
 
     Returns
     -------
@@ -352,7 +355,7 @@ def refine(problem: Problem, phi: np.ndarray, cov: np.ndarray, settings: UKFSett
     out = {"phi": np.asarray(phi, float), "cov": np.asarray(cov, float), "passes": 0, "log_lik": None, "wall_s": 0.0}
     for _ in range(settings.refine_passes):
         sd = settings.refine_inflation * np.sqrt(np.clip(np.diag(out["cov"]), 0.0, None))
-        res = run_priors(problem, [Prior(out["phi"], np.maximum(sd, 1e-6))], walk, parallel=False)
+        res = run_priors(problem, [Prior(out["phi"], np.maximum(sd, 1e-6))], walk, reset=reset, parallel=False)
         out["wall_s"] += res["wall_s"]
         if res["info"][0, K.I_STATUS] != K.OK or not np.all(np.isfinite(res["mean"][0, ns:])):
             break  # keep the last pass that completed

@@ -126,7 +126,7 @@ def concat_records(records: list[xr.Dataset] | tuple[xr.Dataset, ...]) -> tuple[
         if r.attrs["kind"] != kind:
             raise ValueError(f"{src}: a {r.attrs['kind']} test cannot be trained with a {kind} test")
         if not math.isclose(float(r.attrs["dt"]), dt, rel_tol=1e-9):
-            raise ValueError(f"{src}: sampled every {r.attrs['dt']} s, the first record every {dt} s — "
+            raise ValueError(f"{src}: sampled every {float(r.attrs['dt']):.6g} s, the first record every {dt:.6g} s — "
                              "resample one (bayes_mr.data.derive.resample) so both share the sample interval")
         if kind == "structure" and not math.isclose(float(r.attrs["mass"]), float(first.attrs["mass"]), rel_tol=1e-12):
             raise ValueError(f"{src}: storey mass {r.attrs['mass']} kg differs from {first.attrs['mass']} kg")

@@ -1,0 +1,139 @@
+"""Diagnose over a test matrix: the baseline fitted by one likelihood, the residual by condition, and an effect kept
+only when it predicts the conditions it was not fitted on (leave-one-condition-out held-out gain)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bayes_mr.cli.commands import main
+from bayes_mr.data import write_record
+from bayes_mr.data.records import RecordSet
+from bayes_mr.diagnosis.diagnose import diagnose
+from bayes_mr.diagnosis.inflation import design_effect
+from bayes_mr.diagnosis.matrix import NOT_TRANSFERRED
+from bayes_mr.diagnosis.search import Search
+from bayes_mr.likelihood.joint import JointLikelihood
+from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models import get_model
+from bayes_mr.simulation.simulate import synthesize
+
+TRUTH = {"c": 800.0, "k": 300.0, "F_d": 200.0, "sigma": 3000.0}
+#: (amplitude [m], frequency [Hz]) of each sine test: 2 amplitudes × 2 frequencies, 1.5 s at 500 Hz, 1 % noise
+MATRIX = ((0.005, 2.0), (0.005, 4.0), (0.01, 1.0), (0.01, 2.0))
+
+
+def _test(i: int, amp: float, freq: float, f0: float = 0.0, periods: int = 1):
+    """Sine test ``i`` of the damper (dahl), with a force offset ``f0`` [N]; ``periods`` × 1.5 s long."""
+    model = get_model("dahl+force_offset" if f0 else "dahl")
+    t = np.arange(750 * periods) / 500.0
+    w = 2 * np.pi * freq
+    inputs = {"displacement": amp * np.sin(w * t), "velocity": amp * w * np.cos(w * t)}
+    theta = model.theta("device", dict(TRUTH, **({"f0": f0} if f0 else {})))
+    return synthesize(model, theta, t, inputs, noise=0.01, seed=30 + i, source=f"s{i}")
+
+
+def _set(records) -> RecordSet:
+    return RecordSet(tuple(records), ({},) * len(records), ("train",) * len(records), "matrix", {})
+
+
+def _diagnose(records, candidates=None):
+    return diagnose(_set(records), "dahl", search=Search(candidates=candidates), progress=False).to_dict()
+
+
+def test_an_offset_of_the_device_is_named_kept_and_transfers():
+    d = _diagnose([_test(i, a, f, f0=20.0) for i, (a, f) in enumerate(MATRIX)],
+                  ("force_offset", "asymmetry", "cubic_stiffness"))
+    assert d["n_records"] == 4 and d["n_folds"] == 4 and d["cause"] == "force_offset" and d["transfers"]
+    assert d["effects"] == ["force_offset"] and d["selection"][0]["name"] == "force_offset"
+    assert d["extended"]["params"]["f0"] == pytest.approx(20.0, rel=0.05)
+    assert d["held_out_gain"] > 0.9 and d["gain"]["training_gain"] > 0.9
+    kept = next(c for c in d["causes"] if c["name"] == "force_offset")
+    assert kept["selected"] and kept["transfers"] and kept["held_out_gain"] == d["held_out_gain"]
+    # the residual by condition: every test at the baseline's error, every one brought to the noise by the extension
+    assert [r["amplitude"] for r in d["by_condition"]] == pytest.approx([a for a, _ in MATRIX], rel=0.03)
+    assert all(r["extended"]["force_nrmse"] < 0.5 * r["baseline"]["force_nrmse"] for r in d["by_condition"])
+    # a constant force is the larger a share of the force the smaller the test: the small, slow test is missed most
+    worst = max(d["by_condition"], key=lambda r: r["baseline"]["force_nrmse"])
+    assert d["worst_condition"]["file"] == worst["file"] and d["worst_condition"]["amplitude"] < 0.0075
+
+
+def test_the_design_effect_of_a_set_sums_its_records():
+    # two copies of one record: the iid and HAC covariances both double, and their ratio, κ, is the record's
+    rec = _test(0, 0.005, 2.0, f0=20.0)
+    model = get_model("dahl+force_offset")
+    one, two = OutputError(model, rec), JointLikelihood(model, [rec, rec])
+    phi = one.par.coords.to_phi(np.array([dict(TRUTH, f0=20.0)[n] for n in one.par.names]))
+    idx = [one.par.names.index("f0")]
+    sigma = np.asarray(one.noise_sd, float)
+    k1, _ = design_effect(one, phi, sigma, idx)
+    k2, _ = design_effect(two, phi, np.concatenate([sigma, sigma]), idx)
+    assert k2 == pytest.approx(k1, rel=1e-9) and k1 > 0
+
+
+def test_an_offset_of_one_test_fits_only_its_training_conditions():
+    # a load-cell bias in one long test: on the joint likelihood it passes, but fitted without that test the offset
+    # is gone, and fitted with it the others are predicted worse
+    records = [_test(i, a, f, f0=6.0 if i == 2 else 0.0, periods=8 if i == 2 else 1)
+               for i, (a, f) in enumerate(MATRIX)]
+    d = _diagnose(records, ("force_offset",))
+    row = d["causes"][0]
+    assert row["name"] == "force_offset" and row["score"] > d["threshold"] and row["training_gain"] > 0.1
+    assert row["held_out_gain"] < 0 and not row["transfers"] and row["note"] == NOT_TRANSFERRED
+    assert d["cause"] == "none" and not d["transfers"] and NOT_TRANSFERRED in d["verdict"]
+    assert d["extended"]["model"] == "dahl" and d["held_out_gain"] is None
+
+
+def test_a_clean_matrix_gives_none(tmp_path):
+    d0 = tmp_path / "m"
+    d0.mkdir()
+    files = []
+    for i, (a, f) in enumerate(MATRIX):
+        write_record(_test(i, a, f), d0 / f"s{i}.csv")
+        files.append(str(d0 / f"s{i}.csv"))
+    out = tmp_path / "d.json"
+    assert main(["diagnose", *files, "--model", "dahl", "--json", str(out), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["n_records"] == 4 and d["cause"] == "none" and d["effects"] == [] and not d["transfers"]
+    assert all(c["score"] is None or c["score"] < d["threshold"] for c in d["causes"])
+    assert len(d["by_condition"]) == 4 and all(r["baseline"]["force_nrmse"] < 0.05 for r in d["by_condition"])
+
+
+def _untimed(d):
+    """``d`` without its wall times (the only numbers two identical runs may differ in)."""
+    if isinstance(d, dict):
+        return {k: _untimed(v) for k, v in d.items() if k != "wall_s"}
+    if isinstance(d, list):
+        return [_untimed(v) for v in d]
+    return d
+
+
+def test_one_record_through_the_set_path_is_todays_diagnosis():
+    rec = _test(0, 0.005, 2.0, f0=20.0)
+    kw = dict(search=Search(candidates=("force_offset",)), terms=False, progress=False)
+    alone = diagnose(rec, "dahl", **kw).to_dict()
+    assert _untimed(diagnose(_set([rec]), "dahl", **kw).to_dict()) == _untimed(alone)
+    assert alone["cause"] == "force_offset" and "n_records" not in alone
+
+
+def test_a_current_law_is_named_on_a_constant_current_matrix():
+    # each test at one constant current: no single record varies its command, the matrix does (0 and 1 A)
+    model = get_model("dahl+voltage_dependence")
+    truth = dict(TRUTH, a_v=2.0, c_v=400.0, eta=50.0)
+    records, conditions = [], []
+    for i, (amp, freq, current) in enumerate(((0.005, 2.0, 0.0), (0.005, 2.0, 1.0), (0.01, 1.0, 0.0),
+                                              (0.01, 1.0, 1.0))):
+        t = np.arange(750) / 500.0
+        w = 2 * np.pi * freq
+        inputs = {"displacement": amp * np.sin(w * t), "velocity": amp * w * np.cos(w * t),
+                  "current": np.full(t.size, current)}
+        records.append(synthesize(model, model.theta("device", truth), t, inputs, noise=0.01, seed=40 + i,
+                                  source=f"c{i}"))
+        conditions.append({"current": current})
+    matrix = RecordSet(tuple(records), tuple(conditions), ("train",) * 4, "matrix", {"current": "A"})
+    d = diagnose(matrix, "dahl", search=Search(candidates=("voltage_dependence", "force_offset")),
+                 progress=False).to_dict()
+    assert d["n_folds"] == 4 and d["effects"] == ["voltage_dependence"] and d["held_out_gain"] > 0.9
+    assert d["extended"]["params"]["a_v"] == pytest.approx(2.0, rel=0.1)
+    assert d["extended"]["params"]["c_v"] == pytest.approx(400.0, rel=0.1)
+    assert [r["command_value"] for r in d["by_condition"]] == [0.0, 1.0, 0.0, 1.0]
