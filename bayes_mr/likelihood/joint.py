@@ -198,17 +198,8 @@ class JointLikelihood:
             total = total + t
         return total
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """ln posterior (unnormalised) of each row of x; vectorised for emcee."""
-        x = np.atleast_2d(np.asarray(x, float))
-        if not np.all(np.isfinite(x)):
-            raise ValueError("log-posterior asked at a non-finite parameter vector")
-        lp = self.log_prior(x)
-        out = np.full(x.shape[0], -np.inf)
-        inside = np.isfinite(lp)
-        if inside.any():
-            out[inside] = lp[inside] + self.log_likelihood(x[inside])
-        return out
+    #: ln posterior (unnormalised) of each row of x, vectorised for emcee: one record's rule, on the sum
+    __call__ = OutputError.__call__
 
     def residuals(self, phi: np.ndarray, sd: np.ndarray | None = None) -> np.ndarray:
         """Every record's standardised residuals (:meth:`OutputError.residuals`), stacked record by record.

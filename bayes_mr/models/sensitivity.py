@@ -54,13 +54,7 @@ from bayes_mr.models.kernel import (
 deriv_pow = hot(inline="always")(kernel.deriv_pow.py_func)
 
 
-@hot(inline="always")
-def _sgn(v):
-    if v > 0.0:
-        return 1.0
-    if v < 0.0:
-        return -1.0
-    return 0.0
+_sgn = kernel._sgn
 
 
 @hot(inline="always")
