@@ -60,6 +60,10 @@ class RecordSet:
         The manifest's path, or "" for a list of files.
     units : dict
         Condition name → the unit the manifest's header gave it ("" for none).
+    record_offsets : bool
+        Each test carries its own constant force offset (a load cell zeroed before each test, a preload set
+        per test): a likelihood of the set estimates one ``f0[r]`` per record
+        (:class:`bayes_mr.likelihood.joint.JointLikelihood`) and a prediction of a record profiles its own.
     """
 
     records: tuple[xr.Dataset, ...]
@@ -67,6 +71,7 @@ class RecordSet:
     roles: tuple[str, ...] = ()
     source: str = ""
     units: dict = field(default_factory=dict)
+    record_offsets: bool = False
 
     def __post_init__(self):
         records = tuple(self.records)
@@ -113,7 +118,7 @@ class RecordSet:
         if not keep:
             raise ValueError(f"{self.source or 'record set'}: no record has role '{role}'")
         return RecordSet(tuple(self.records[i] for i in keep), tuple(self.conditions[i] for i in keep),
-                         tuple(role for _ in keep), self.source, self.units)
+                         tuple(role for _ in keep), self.source, self.units, self.record_offsets)
 
     def split(self) -> tuple["RecordSet", "RecordSet | None"]:
         """(the ``train`` records, the ``test`` records or None): what a fit fits and what it predicts.

@@ -74,7 +74,11 @@ class Fit:
     def params(self) -> dict[str, float]:
         """Free and fixed parameters at the optimum, name → value [SI]."""
         names = self.model.param_names(self.lik.kind)
-        return {n: float(v) for n, v in zip(names, self.theta_full)}
+        out = {n: float(v) for n, v in zip(names, self.theta_full)}
+        extra = getattr(self.lik, "offset_names", ())  # a joint fit's per-record force offsets, f0[r]
+        if extra:
+            out.update(zip(extra, map(float, self.lik.offsets(self.result.phi))))
+        return out
 
 
 def record_mse(record: xr.Dataset, predicted: dict[str, np.ndarray]) -> float:

@@ -86,8 +86,9 @@ def _joint_design_effect(lik, phi: np.ndarray, sigma: np.ndarray, idx: list[int]
     rs, js = [], []
     for k, part in enumerate(lik.parts):
         rf = Residuals(part, np.asarray(sigma, float)[k * n_c:(k + 1) * n_c])
-        rs.append(rf(phi))
-        js.append(rf.jacobian(phi, central=True))
+        own = lik.part_phi(phi, k)  # the shared parameters and (with record offsets) this record's offset
+        rs.append(rf(own))
+        js.append(lik.scatter(rf.jacobian(own, central=True), k))
     J = np.vstack(js)
     base = [j for j in range(J.shape[1]) if j not in idx]
     G = J[:, idx]

@@ -28,7 +28,7 @@ from bayes_mr.inference.joint_results import build_any
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.scores.pooled import pooled
-from bayes_mr.models import Model, get_model
+from bayes_mr.models import FORCE_OFFSET, Model, get_model
 from bayes_mr.scores import score
 from bayes_mr.scores.conditions import condition_row
 from bayes_mr.simulation.simulate import Inputs, simulate
@@ -149,8 +149,32 @@ def validate(idata, record: xr.Dataset, *, warmup: float = 0.0) -> dict:
     return validated(idata, record, warmup)[0]
 
 
-def validated(idata, record: xr.Dataset, warmup: float) -> tuple[dict, dict[str, np.ndarray]]:
-    """:func:`validate`'s dict, and the prediction it scored (channel → array, on the record's samples)."""
+def profiled(model: str, record: xr.Dataset, theta: dict[str, float], scored: xr.Dataset,
+             inputs: Inputs) -> tuple[dict[str, np.ndarray], float]:
+    """``model`` at ``theta`` on ``record`` with the record's own force offset: (prediction, f0 [N]).
+
+    A test's force offset (a load cell zeroed before it) is a nuisance of that test, which no other test
+    predicts: it is profiled on the record, f0 the mean force residual over ``scored``'s valid samples —
+    the least-squares value of an additive constant. ``theta``'s per-record offsets ``f0[r]`` of the fit's own
+    records are not used.
+    """
+    shared = {k: v for k, v in theta.items() if not k.startswith("f0[")}
+    model = get_model(model)
+    if model.effect("force_offset") is None:
+        model = model + FORCE_OFFSET
+    shared["f0"] = 0.0
+    pred = predict(model, record, shared, inputs.interp, inputs.command_interp)
+    valid = scored["valid"].values.astype(bool) if "valid" in scored else np.ones(scored.sizes["time"], bool)
+    shared["f0"] = float(np.mean((record["force"].values - pred["force"])[valid]))
+    return predict(model, record, shared, inputs.interp, inputs.command_interp), shared["f0"]
+
+
+def validated(idata, record: xr.Dataset, warmup: float,
+              record_offsets: bool | None = None) -> tuple[dict, dict[str, np.ndarray]]:
+    """:func:`validate`'s dict, and the prediction it scored (channel → array, on the record's samples).
+
+    ``record_offsets`` (default: whether the fit had them): the record's own force offset is profiled on it
+    (:func:`profiled`, its value in ``record_offset`` [N]) instead of taken from the fit."""
     summary = results.summary_of(idata)
     if record.attrs["kind"] != summary.kind:
         raise ValueError(f"the result is a {summary.kind} test, the record a {record.attrs['kind']} test")
@@ -159,10 +183,17 @@ def validated(idata, record: xr.Dataset, warmup: float) -> tuple[dict, dict[str,
     t0 = _time.perf_counter()
     # parameters held fixed in the fit are not in the point estimate; without them the defaults would be used
     inputs = Inputs.from_record(record)
-    pred = predict(summary.model, record, {**summary.extra.get("fixed", {}), **results.point_of(idata)},
-                   inputs.interp, inputs.command_interp)
+    theta = {**summary.extra.get("fixed", {}), **results.point_of(idata)}
+    offsets = bool(summary.extra.get("record_offsets")) if record_offsets is None else record_offsets
+    if offsets:
+        pred, offset = profiled(summary.model, record, theta, after_warmup(record, warmup), inputs)
+    else:  # a fit's per-record offsets belong to its own records (f0[r]), not to this one
+        pred = predict(summary.model, record, {k: v for k, v in theta.items() if not k.startswith("f0[")},
+                       inputs.interp, inputs.command_interp)
     scores = score(after_warmup(record, warmup), pred)
     out = summary.to_dict()
+    if offsets:
+        out["record_offset"] = offset
     out.update(
         mse=scores["mse"], mse_channels=scores["mse_channels"], force_errors=scores["force_errors"],
         force_nrmse=scores["force_nrmse"], rmse=scores["rmse"], masked=int(record.attrs.get("masked", 0)),
@@ -174,8 +205,13 @@ def validated(idata, record: xr.Dataset, warmup: float) -> tuple[dict, dict[str,
     return out, pred
 
 
-def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -> dict:
+def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0,
+                     record_offsets: bool | None = None) -> dict:
     """:func:`validate` on each of several records, and the scores pooled over them.
+
+    Each record's own force offset is profiled on it (:func:`profiled`) where ``record_offsets`` says so,
+    by default where the fit had per-record offsets or the set says its tests carry their own
+    (:attr:`~bayes_mr.data.records.RecordSet.record_offsets`).
 
     Returns
     -------
@@ -191,7 +227,9 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0) -
         peak-force and energy-per-cycle errors).
     """
     recs = list(records)
-    done = [validated(idata, r, warmup) for r in recs]
+    if record_offsets is None and getattr(records, "record_offsets", False):
+        record_offsets = True
+    done = [validated(idata, r, warmup, record_offsets) for r in recs]
     each = [e for e, _ in done]
     if len(each) == 1:  # a manifest's one record: its keys, and what the manifest says of it
         return {**each[0], "records": records.describe()} if isinstance(records, RecordSet) else each[0]

@@ -44,10 +44,11 @@ with warnings.catch_warnings():
 def _record_scores(lik: JointLikelihood, post: Posterior) -> tuple[list[dict | None], list[dict]]:
     """Each record's scores of the point estimate (None where it does not simulate) and its noise info."""
     scores, noise = [], []
-    for part in lik.parts:
-        sim = simulate(part.model, part.inputs, part.par.full_theta(post.point)[None], **post.simulation)
+    for r, part in enumerate(lik.parts):
+        own = replace(post, point=np.asarray(post.point, float)[lik.index[r]]) if lik.record_offsets else post
+        sim = simulate(part.model, part.inputs, part.par.full_theta(own.point)[None], **post.simulation)
         scores.append(score(part.record, {k: v[0] for k, v in sim.outputs.items()}) if sim.ok.all() else None)
-        noise.append(results.noise_info(part, post, sim))
+        noise.append(results.noise_info(part, own, sim))
     return scores, noise
 
 
@@ -103,7 +104,8 @@ def build_joint(lik: JointLikelihood, post: Posterior, *, about: list[dict] | No
             f"[{r}] {n['noise_model']}" for r, n in enumerate(noise)),
         extra={**post.info, **_noise_keys(lik, noise), "mse_channels": list(lik.channels), "fixed": dict(lik.fixed),
                **describe_interp(first.interp, post.engine, first.command_interp),
-               "n_records": len(lik.parts), "records": _records_key(lik, scores, noise, about or lik.about)},
+               "n_records": len(lik.parts), "records": _records_key(lik, scores, noise, about or lik.about),
+               "record_offsets": lik.record_offsets},
     )
     joined, offsets = _joined(lik.records)
     ll = _log_likelihood_group(lik, post, joined, offsets)

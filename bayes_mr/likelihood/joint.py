@@ -19,6 +19,19 @@ and longest duration of any record (:func:`joint_scales`), so it holds each reco
 The parameter vector is x = [φ, ln σ_1, …, ln σ_R] (the noise part only when
 sampled), σ_r one SD per measured channel of record r; with one record it is
 that record's x, and every number is that record's.
+
+Per-record force offsets (``record_offsets=True``): a test's load cell is zeroed
+before each test, and an accumulator's preload moves with the rig's set-up, so a
+constant force offset is a property of the test, not of the device. Each record r
+then gets its own additive offset ``f0[r]`` [N] (the ``force_offset`` effect's
+``f0``, one per record; the label is the record's index, as ``sigma_<channel>[r]``'s),
+a nuisance estimated with the shared parameters: x = [φ, f0[0], …, f0[R−1], ln σ…]
+(one record's is labelled ``f0``, as its noise SD is ``sigma_<channel>``).
+Each record's likelihood is that of ``MODEL+force_offset`` with its f0 taken from
+x; its prior is flat over ±1 × that record's own force scale (the 99th-percentile
+|F − median F| of :func:`~bayes_mr.likelihood.output_error.record_scales`: the
+``force_offset`` effect's plausible range on that record alone). With one record
+this is exactly that record's ``MODEL+force_offset`` likelihood.
 """
 
 from __future__ import annotations
@@ -28,9 +41,20 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 
+from dataclasses import dataclass
+
 from bayes_mr.likelihood.noise_model import ResidualModel
-from bayes_mr.likelihood.output_error import OutputError, record_scales
-from bayes_mr.models import Model, Scales, get_model
+from bayes_mr.likelihood.output_error import OutputError, Parameterisation, record_scales
+from bayes_mr.models import FORCE_OFFSET, Model, Scales, get_model
+from bayes_mr.models.params import Coordinates
+
+#: The force offset's parameter (``force_offset``'s ``f0``); record r's is labelled ``f0[r]``.
+OFFSET = FORCE_OFFSET.params[0].name
+
+
+def offset_label(r: int) -> str:
+    """The label of record r's force offset in a joint fit's parameters: ``f0[r]``."""
+    return f"{OFFSET}[{r}]"
 
 
 def joint_scales(records: Sequence[xr.Dataset]) -> Scales:
@@ -46,6 +70,64 @@ def joint_scales(records: Sequence[xr.Dataset]) -> Scales:
                   velocity=max(s.velocity for s in each), duration=max(s.duration for s in each))
 
 
+@dataclass(frozen=True)
+class OffsetParameterisation:
+    """The joint coordinates of shared parameters and per-record offsets, φ = [φ_shared, f0[0] …].
+
+    Reads as a :class:`~bayes_mr.likelihood.output_error.Parameterisation` where the engines and results read
+    one (``names``, ``coords``, ``model``, ``kind``); :meth:`full` and :meth:`full_theta` give the *shared*
+    model's full θ (the offsets dropped: each record's own θ is
+    :meth:`JointLikelihood.record_theta`).
+    """
+
+    shared: Parameterisation
+    coords: Coordinates
+
+    @property
+    def model(self) -> Model:
+        return self.shared.model
+
+    @property
+    def kind(self) -> str:
+        return self.shared.kind
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.coords.names
+
+    @property
+    def template(self) -> np.ndarray:
+        return self.shared.template
+
+    @property
+    def free_idx(self) -> np.ndarray:
+        return self.shared.free_idx
+
+    def full(self, phi: np.ndarray) -> np.ndarray:
+        """The shared model's full θ (..., n_full) from the joint φ (..., p + R) [SI]."""
+        return self.shared.full(np.asarray(phi, float)[..., : len(self.shared.names)])
+
+    def full_theta(self, theta: np.ndarray) -> np.ndarray:
+        """The shared model's full θ (..., n_full) from the joint free θ (..., p + R) [SI]."""
+        return self.shared.full_theta(np.asarray(theta, float)[..., : len(self.shared.names)])
+
+
+def offset_labels(n: int) -> tuple[str, ...]:
+    """The offsets' labels of a set of n records: ``f0[r]``, or ``f0`` for one (as the noise SDs are labelled)."""
+    return (OFFSET,) if n == 1 else tuple(offset_label(r) for r in range(n))
+
+
+def _joined_coords(shared: Coordinates, parts: list[OutputError]) -> Coordinates:
+    """The shared coordinates followed by each record's offset coordinate (its own range and scale)."""
+    j = [p.par.names.index(OFFSET) for p in parts]
+    cat = lambda a, attr: np.concatenate([a] + [getattr(p.par.coords, attr)[[k]] for p, k in zip(parts, j)])
+    return Coordinates(names=shared.names + offset_labels(len(parts)),
+                       scale=cat(shared.scale, "scale"), log=cat(shared.log, "log"),
+                       lower=cat(shared.lower, "lower"), upper=cat(shared.upper, "upper"),
+                       units=tuple(shared.units) + tuple(p.par.coords.units[k] for p, k in zip(parts, j)),
+                       asinh=cat(shared.asinh, "asinh"))
+
+
 class JointLikelihood:
     """Output-error log-posterior of a model over several records, batched over x (module docstring).
 
@@ -57,7 +139,11 @@ class JointLikelihood:
         :class:`~bayes_mr.data.records.RecordSet` is one; its files, roles and
         conditions are then kept in :attr:`about`).
     ranges, fixed, noise, residual, input_interp, command_interp
-        As :class:`~bayes_mr.likelihood.output_error.OutputError`, the same for every record.
+        As :class:`~bayes_mr.likelihood.output_error.OutputError`, the same for every record
+        (``ranges`` may also hold ``f0[r]``: record r's offset range [N]).
+    record_offsets : bool, optional
+        A force offset ``f0[r]`` per record (module docstring); default: the set's
+        :attr:`~bayes_mr.data.records.RecordSet.record_offsets` (off for a list of records).
 
     Attributes
     ----------
@@ -65,12 +151,16 @@ class JointLikelihood:
         One likelihood per record, sharing the parameterisation.
     about : list of dict
         Per record: ``file``, ``role`` and ``conditions`` (what the results report of each record).
+    index : list of ndarray of int
+        Per record: the positions in the joint φ of its likelihood's φ (the identity without offsets).
     """
 
     def __init__(self, model: Model | str, records: Sequence[xr.Dataset], *, ranges: dict | None = None,
                  fixed: dict | None = None, noise: str = "sampled", residual: str | ResidualModel = "iid",
-                 input_interp: str = "auto", command_interp: str = "auto"):
+                 input_interp: str = "auto", command_interp: str = "auto", record_offsets: bool | None = None):
         about = records.describe() if hasattr(records, "describe") else None
+        if record_offsets is None:
+            record_offsets = bool(getattr(records, "record_offsets", False))
         records = list(records)
         self.about = about or [{"file": str(r.attrs.get("source", "")), "role": "train", "conditions": {}}
                                for r in records]
@@ -78,9 +168,22 @@ class JointLikelihood:
             raise ValueError("a joint likelihood needs at least one record")
         model = get_model(model)
         scales = joint_scales(records)
-        self.parts = [OutputError(model, r, ranges=ranges, fixed=fixed, noise=noise, scales=scales,
+        self.record_offsets = bool(record_offsets)
+        shared_ranges = {k: v for k, v in (ranges or {}).items() if not k.startswith(f"{OFFSET}[")}
+        if self.record_offsets:
+            if model.effect("force_offset") is not None:
+                raise ValueError(f"{model.name} with per-record offsets: each record's f0[r] is its force offset — "
+                                 "drop +force_offset from the model or the record offsets")
+            if any(r.attrs["kind"] != "device" for r in records):
+                raise ValueError("per-record force offsets are for device tests (the force is what is measured)")
+            part_model = model + FORCE_OFFSET
+            own = [{**shared_ranges, OFFSET: (ranges or {}).get(
+                offset_label(r), FORCE_OFFSET.params[0].plausible(record_scales(rec)))} for r, rec in enumerate(records)]
+        else:
+            part_model, own = model, [ranges] * len(records)
+        self.parts = [OutputError(part_model, r, ranges=rng, fixed=fixed, noise=noise, scales=scales,
                                   residual=residual, input_interp=input_interp, command_interp=command_interp)
-                      for r in records]
+                      for r, rng in zip(records, own)]
         first = self.parts[0]
         for part in self.parts[1:]:
             src = part.record.attrs.get("source", "record")
@@ -91,10 +194,20 @@ class JointLikelihood:
             if part.par.names != first.par.names or part.fixed != first.fixed:
                 raise ValueError(f"{src}: other free or fixed parameters than the first record's "
                                  f"({', '.join(part.par.names)}) — give every record the same mass")
-        self.model, self.kind, self.par = first.model, first.kind, first.par
-        self.channels, self.fixed, self.ranges, self.scales = first.channels, first.fixed, first.ranges, scales
+        self.kind, self.channels, self.fixed, self.scales = first.kind, first.channels, first.fixed, scales
         self.noise = noise
-        self.phi_lo, self.phi_hi = first.phi_lo, first.phi_hi
+        if self.record_offsets:
+            shared = Parameterisation.build(model, self.kind, scales, ranges=shared_ranges, fixed=first.fixed)
+            self.model, self.ranges = model, {k: v for k, v in first.ranges.items() if k != OFFSET}
+            self.par = OffsetParameterisation(shared, _joined_coords(shared.coords, self.parts))
+            p = len(shared.names)
+            self.index = [np.array([p + r if n == OFFSET else shared.names.index(n) for n in part.par.names])
+                          for r, part in enumerate(self.parts)]
+            self.phi_lo, self.phi_hi = self.par.coords.phi_lower, self.par.coords.phi_upper
+        else:
+            self.model, self.par, self.ranges = first.model, first.par, first.ranges
+            self.index = [np.arange(len(first.par.names))] * len(self.parts)
+            self.phi_lo, self.phi_hi = first.phi_lo, first.phi_hi
         # the same floating-point steps as OutputError's constant, so one record's prior is its own to the bit
         const = -float(np.sum(np.log(self.phi_hi - self.phi_lo)))
         if noise == "sampled":
@@ -110,6 +223,39 @@ class JointLikelihood:
     @property
     def n_params(self) -> int:
         return len(self.par.names)
+
+    @property
+    def offset_names(self) -> tuple[str, ...]:
+        """The per-record offsets' labels ``f0[r]`` in φ's order (``f0`` for one record, whose offset is its
+        ``MODEL+force_offset``'s; empty without record offsets)."""
+        return offset_labels(len(self.parts)) if self.record_offsets else ()
+
+    def part_phi(self, phi: np.ndarray, r: int) -> np.ndarray:
+        """Record r's φ (..., p_r) from the joint φ (..., p): the shared parameters and its own offset."""
+        phi = np.asarray(phi, float)
+        return phi[..., self.index[r]] if self.record_offsets else phi
+
+    def scatter(self, J: np.ndarray, r: int) -> np.ndarray:
+        """Record r's Jacobian (n, p_r) by its φ as one by the joint φ (n, p): zeros at the other offsets."""
+        if not self.record_offsets:
+            return J
+        out = np.zeros((J.shape[0], self.n_params))
+        out[:, self.index[r]] = J
+        return out
+
+    def record_model(self, r: int) -> Model:
+        """The model record r is simulated with (``MODEL+force_offset`` with record offsets)."""
+        return self.parts[r].model
+
+    def record_theta(self, phi: np.ndarray, r: int) -> np.ndarray:
+        """Record r's full θ [SI] of :meth:`record_model` from the joint φ."""
+        return self.parts[r].par.full(self.part_phi(phi, r))
+
+    def offsets(self, phi: np.ndarray) -> np.ndarray:
+        """The records' force offsets f0[r] [N] at the joint φ (..., R) (empty without record offsets)."""
+        if not self.record_offsets:
+            return np.zeros(np.shape(phi)[:-1] + (0,))
+        return self.par.coords.to_theta(np.asarray(phi, float))[..., -len(self.parts):]
 
     @property
     def n_sigma(self) -> int:
@@ -160,11 +306,12 @@ class JointLikelihood:
     def part_x(self, x: np.ndarray, r: int) -> np.ndarray:
         """Record r's parameter vector [φ, ln σ_r] (B, p + C) from the joint x (B, ndim)."""
         x = np.atleast_2d(np.asarray(x, float))
+        phi = self.part_phi(x[:, : self.n_params], r)
         if self.noise != "sampled":
-            return x[:, : self.n_params]
+            return phi
         c = len(self.channels)
         lo = self.n_params + r * c
-        return np.concatenate([x[:, : self.n_params], x[:, lo: lo + c]], axis=1)
+        return np.concatenate([phi, x[:, lo: lo + c]], axis=1)
 
     def joint_x(self, phi: np.ndarray, sigma: np.ndarray) -> np.ndarray:
         """The joint x from φ (p,) and every record's σ (R·C,) [channel units]."""
@@ -207,5 +354,6 @@ class JointLikelihood:
         ``sd`` (R·C,) weights record r's channels by ``sd[r·C:(r+1)·C]``; default each record's noise floor.
         """
         c = len(self.channels)
-        return np.concatenate([p.residuals(phi, None if sd is None else np.asarray(sd, float)[r * c:(r + 1) * c])
+        return np.concatenate([p.residuals(self.part_phi(phi, r),
+                                           None if sd is None else np.asarray(sd, float)[r * c:(r + 1) * c])
                                for r, p in enumerate(self.parts)])

@@ -115,7 +115,7 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
     for fold in range(max(folds) + 1):
         keep = [j for j in range(n) if folds[j] != fold]
         train = RecordSet(tuple(records[j] for j in keep), tuple(records.conditions[j] for j in keep),
-                          ("train",) * len(keep), records.source, records.units)
+                          ("train",) * len(keep), records.source, records.units, records.record_offsets)
         job = Identify(model, engine("lsq", settings=Emcee.lsq_settings(seed)), ranges=ranges or {},
                        fixed=fixed or {}, noise=noise)
         idata = job.fit(train, seed=seed, progress=False)
@@ -134,7 +134,7 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
 
 def _fold(idata, records: RecordSet, i: int, warmup: float, train: RecordSet) -> dict:
     """The table row of held-out record ``i``, with what :func:`leave_one_out` pools under ``_scores``."""
-    out, pred = validated(idata, records[i], warmup)
+    out, pred = validated(idata, records[i], warmup, records.record_offsets or None)
     scored = after_warmup(records[i], warmup)
     n = int(scored["valid"].values.sum()) if "valid" in scored else scored.sizes["time"]
     keys = ("mse", "mse_channels", "force_errors", "force_nrmse", "rmse")

@@ -39,20 +39,26 @@ from bayes_mr.inference.lsq.refine import Residuals, refine
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
 
-__all__ = ["JointResiduals", "fit_any", "fit_joint", "laplace_any", "laplace_joint", "peak_any", "peak_joint"]
+__all__ = ["JointResiduals", "fit_any", "start_offsets", "fit_joint", "laplace_any", "laplace_joint", "peak_any", "peak_joint"]
 
 
 class JointResiduals:
     """Every record's :class:`~.refine.Residuals` at a shared φ, stacked (and their Jacobians).
 
-    ``sds``: per record, its channels' weights σ_r [channel units].
+    ``sds``: per record, its channels' weights σ_r [channel units]. ``lik``: the joint likelihood whose φ
+    is given, when its records' φ are not all of it (per-record offsets,
+    :meth:`~bayes_mr.likelihood.joint.JointLikelihood.part_phi`); None: each record reads φ whole.
     """
 
-    def __init__(self, parts: list[OutputError], sds: list[np.ndarray]):
+    def __init__(self, parts: list[OutputError], sds: list[np.ndarray], lik: JointLikelihood | None = None):
         self.each = [Residuals(p, sd) for p, sd in zip(parts, sds)]
+        self.lik = lik if lik is not None and lik.record_offsets else None
+
+    def _phi(self, phi, r):
+        return phi if self.lik is None else self.lik.part_phi(phi, r)
 
     def __call__(self, phi):
-        return np.concatenate([f(phi) for f in self.each])
+        return np.concatenate([f(self._phi(phi, r)) for r, f in enumerate(self.each)])
 
     @property
     def ok(self) -> bool:
@@ -60,7 +66,10 @@ class JointResiduals:
         return all(f.last is not None for f in self.each)
 
     def jacobian(self, phi, central: bool = False):
-        return np.vstack([f.jacobian(phi, central) for f in self.each])
+        if self.lik is None:
+            return np.vstack([f.jacobian(phi, central) for f in self.each])
+        return np.vstack([self.lik.scatter(f.jacobian(self._phi(phi, r), central), r)
+                          for r, f in enumerate(self.each)])
 
 
 def fit_any(lik, settings: LSQSettings = LSQSettings(), *, progress=None) -> LSQResult:
@@ -78,21 +87,53 @@ def fit_joint(lik: JointLikelihood, settings: LSQSettings = LSQSettings(), *, pr
     say = progress or (lambda msg: None)
     lead = max(range(len(lik.parts)), key=lambda r: lik.parts[r].n_valid)
     phi, runs = search(lik.parts[lead], settings, say)
+    if lik.record_offsets:
+        phi = start_offsets(lik, phi, lead)
+        runs = [{**run, **{k: _embedded(lik, run[k], lead) for k in ("phi0", "phi")}} for run in runs]
     say(f"starts searched on record {lead}; refining on all {len(lik.parts)} records")
     sds = [p.noise_sd.copy() for p in lik.parts]
-    phi = refine(lik, phi, None, settings.max_nfev, residuals=JointResiduals(lik.parts, sds)).x
-    for part in lik.parts:
+    phi = refine(lik, phi, None, settings.max_nfev, residuals=JointResiduals(lik.parts, sds, lik)).x
+    for r, part in enumerate(lik.parts):
         if part.residual.kind == "ar" and not part.residual.resolved:
-            part.choose_residual_orders(phi)
+            part.choose_residual_orders(lik.part_phi(phi, r))
     if settings.reweight:
-        sds = [ml_sd(p, p.predict(phi)[0][0]) for p in lik.parts]
-        phi = refine(lik, phi, None, settings.max_nfev, residuals=JointResiduals(lik.parts, sds)).x
+        sds = [ml_sd(p, p.predict(lik.part_phi(phi, r))[0][0]) for r, p in enumerate(lik.parts)]
+        phi = refine(lik, phi, None, settings.max_nfev, residuals=JointResiduals(lik.parts, sds, lik)).x
     return laplace_joint(lik, phi, starts=runs, wall_s=_time.perf_counter() - t0,
                          replicas=settings.input_noise_replicas)
 
 
+def _embedded(lik: JointLikelihood, phi_lead: np.ndarray, lead: int) -> np.ndarray:
+    """The lead record's φ as a joint φ: the other records' offsets at 0, where the search left them (it ran on
+    the lead record alone)."""
+    out = np.zeros(lik.n_params)
+    out[lik.index[lead]] = phi_lead
+    return out
+
+
+def start_offsets(lik: JointLikelihood, phi_lead: np.ndarray, lead: int) -> np.ndarray:
+    """The joint φ from the lead record's optimum ``phi_lead``: its shared parameters and offset, and every other
+    record's offset at its mean force residual there (the least-squares offset of an additive constant)."""
+    p = lik.n_params
+    phi = np.zeros(p)
+    phi[lik.index[lead]] = phi_lead
+    coords = lik.par.coords
+    for r, part in enumerate(lik.parts):
+        if r == lead:
+            continue
+        at = lik.part_phi(phi, r).copy()
+        j = int(np.flatnonzero(lik.index[r] == p - len(lik.parts) + r)[0])
+        at[j] = 0.0
+        yhat, sim = part.predict(at)
+        f0 = float(np.mean((part.y - yhat[0])[part.valid, part.channels.index("force")])) if sim.ok[0] else 0.0
+        k = p - len(lik.parts) + r
+        phi[k] = np.clip(coords.to_phi(np.full(p, f0))[k], lik.phi_lo[k], lik.phi_hi[k])
+    return phi
+
+
 def _record_terms(part: OutputError, phi: np.ndarray, sampled: bool, replicas: int) -> dict:
-    """One record's share of the joint Laplace approximation at φ: σ, J, JᵀJ, Ω, ln p, evidence counts."""
+    """One record's share of the joint Laplace approximation at φ (record r's own φ, :meth:`~bayes_mr.likelihood.
+    joint.JointLikelihood.part_phi`): σ, J, JᵀJ, Ω, ln p, evidence counts; J by that record's φ."""
     yhat, _ = part.predict(phi)
     ar = part.residual.kind == "ar"
     if ar:
@@ -125,7 +166,13 @@ def laplace_joint(lik: JointLikelihood, phi: np.ndarray, *, starts=None, wall_s:
     if len(lik.parts) == 1:
         return laplace(lik.parts[0], phi, starts=starts, wall_s=wall_s, replicas=replicas)
     sampled = lik.noise == "sampled"
-    each = [_record_terms(p, phi, sampled, replicas) for p in lik.parts]
+    each = [_record_terms(p, lik.part_phi(phi, r), sampled, replicas) for r, p in enumerate(lik.parts)]
+    if lik.record_offsets:  # each record's J and Ω by the joint φ: zero rows and columns at the others' offsets
+        for r, e in enumerate(each):
+            e["J"] = lik.scatter(e["J"], r)
+            e["JtJ"] = e["J"].T @ e["J"]
+            S = lik.scatter(np.eye(lik.index[r].size), r)
+            e["omega"] = S.T @ e["omega"] @ S
     J = np.vstack([e["J"] for e in each])
     JtJ = sum(e["JtJ"] for e in each)
     cov = calibrate.sandwich(J, sum(e["omega"] for e in each))
@@ -166,12 +213,12 @@ def peak_joint(lik: JointLikelihood, phi0: np.ndarray, max_nfev: int) -> dict:
     if len(lik.parts) == 1:
         return peak_from(lik.parts[0], phi0, max_nfev)
     phi0 = np.asarray(phi0, float)
-    sds = [ml_sd(p, p.predict(phi0)[0][0]) if lik.noise == "sampled" else np.asarray(p.noise_sd, float)
-           for p in lik.parts]
-    fn = JointResiduals(lik.parts, sds)
+    sds = [ml_sd(p, p.predict(lik.part_phi(phi0, r))[0][0]) if lik.noise == "sampled"
+           else np.asarray(p.noise_sd, float) for r, p in enumerate(lik.parts)]
+    fn = JointResiduals(lik.parts, sds, lik)
     r0 = fn(phi0)
     cost0 = 0.5 * float(np.sum(r0**2)) if fn.ok else math.inf
-    res = refine(lik, phi0, None, max_nfev, residuals=JointResiduals(lik.parts, sds))
+    res = refine(lik, phi0, None, max_nfev, residuals=JointResiduals(lik.parts, sds, lik))
     improved = bool(np.all(np.isfinite(res.x)) and res.cost < cost0)
     phi = res.x if improved else phi0
     return {"phi": phi, "delta": phi - phi0, "nfev": int(res.nfev), "improved": improved}

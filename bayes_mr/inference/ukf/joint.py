@@ -9,6 +9,12 @@ filter has one measurement-noise covariance: the records share their pooled
 noise variances (exact for one rig's sensors; least squares and emcee keep
 each record's own σ_r). A run is chosen by its MSE pooled over the records
 (:func:`~bayes_mr.inference.ukf.validation.combine`), each simulated from rest.
+
+Per-record force offsets (``JointLikelihood(record_offsets=True)``) are refused: the filter's augmented
+state carries one parameter vector through every record, so an offset there would be one offset of the
+whole set (``MODEL+force_offset``), not one per test. A per-record nuisance needs its own state, reset to
+its prior at each record's first sample, and its estimate read at each record's last; the filter does not
+have that, so least squares and emcee estimate the offsets.
 """
 
 from __future__ import annotations
@@ -37,7 +43,11 @@ def filtered(lik: OutputError | JointLikelihood) -> tuple[OutputError, object, l
     if not isinstance(lik, JointLikelihood):
         return lik, None, [lik.record]
     if len(lik.parts) == 1:
-        return lik.parts[0], None, [lik.parts[0].record]
+        return lik.parts[0], None, [lik.parts[0].record]  # with record offsets: its MODEL+force_offset
+    if lik.record_offsets:
+        raise ValueError("the UKF does not estimate per-record force offsets (its parameter state is carried "
+                         "across the records): fit them by least squares or emcee (--engine lsq|mcmc), or drop "
+                         "--record-offsets")
     joined, reset = concat_records(lik.records)
     one = OutputError(lik.model, joined, ranges=lik.ranges, fixed=lik.fixed, noise=lik.noise, scales=lik.scales)
     return one, reset, lik.records
