@@ -88,11 +88,15 @@ def _conditions(args) -> dict:
 def _read_records(paths: list[str], args):
     """The verb's DATA: one record (a file, read as :func:`_read` reads it), or a RecordSet of several
     (files or one manifest CSV, :func:`bayes_mr.data.records.load_records`), ``--set`` conditions applied."""
-    from bayes_mr.data.records import is_manifest, load_records, with_constant_command
+    from dataclasses import replace
+
+    from bayes_mr.data.records import RecordSet, is_manifest, load_records, with_constant_command
 
     constants = _conditions(args)
+    offsets = bool(getattr(args, "record_offsets", False))
     if len(paths) == 1 and not is_manifest(paths[0]):
-        return with_constant_command(_read(paths[0], args), constants)
+        one = with_constant_command(_read(paths[0], args), constants)
+        return RecordSet((one,), record_offsets=True) if offsets else one  # its own offset: MODEL+force_offset
     records = load_records(
         paths, constants=constants, mass=getattr(args, "mass", None), units=getattr(args, "units", None),
         columns=getattr(args, "columns", None), quality=not getattr(args, "no_quality", False),
@@ -102,7 +106,7 @@ def _read_records(paths: list[str], args):
             value = getattr(args, name, "auto")
             if value != "auto":
                 rec.attrs[name] = value
-    return records
+    return replace(records, record_offsets=True) if offsets else records
 
 
 def _n_records(rec) -> int:
@@ -341,6 +345,9 @@ def cmd_diagnose(args) -> int:
 
     rec = _read_records(args.data, args)
     if _n_records(rec) and len(rec) == 1:
+        if args.record_offsets:
+            raise CLIError("--record-offsets gives each of several tests its own force offset; on one record the "
+                           "offset is the model's: --model FORM+force_offset")
         rec = rec[0]
     other = _read(args.validate, args) if args.validate else None
     with _executor(args) as ex:

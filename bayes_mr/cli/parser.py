@@ -28,6 +28,11 @@ def _records_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="a condition of every record, e.g. current=0.5 [A] or voltage=2 [V]: a constant command "
                         "becomes the record's command channel where the file has none (a manifest's cell wins)")
+    p.add_argument("--record-offsets", action="store_true",
+                   help="each device test has its own constant force offset f0[r] [N] (a load cell zeroed per test, "
+                        "a preload set per test): estimated per record with the shared parameters (lsq, mcmc; the "
+                        "UKF refuses it), profiled on each record a fit predicts; diagnose then does not name a "
+                        "force offset as an effect")
 
 
 def _reading_flags(p: argparse.ArgumentParser) -> None:

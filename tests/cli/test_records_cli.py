@@ -52,6 +52,10 @@ def test_manifest_fits_train_rows_and_predicts_test_rows(files, tmp_path):
     (["fit", "{a}", "{h}", "--model", "dahl", "--engine", "ukf"], "h.csv: sampled every 0.004 s, the first record"),
     (["diagnose", "{a}", "{a}", "--model", "dahl", "--validate", "{a}"], "validates on each held-out condition"),
     (["fit", "{a}", "--model", "dahl", "--set", "current=high"], "--set current=high: not a number"),
+    (["fit", "{a}", "{a}", "--model", "dahl", "--engine", "ukf", "--record-offsets"],
+     "the UKF does not estimate per-record force offsets"),
+    (["fit", "{a}", "{a}", "--model", "dahl+force_offset", "--record-offsets"], "drop +force_offset"),
+    (["diagnose", "{a}", "--model", "dahl", "--record-offsets"], "on one record the offset is the model's"),
 ])
 def test_refusals_are_one_line(files, tmp_path, capsys, argv, says):
     out = tmp_path / "out.json"
@@ -78,3 +82,29 @@ def test_compare_a_manifest_predicts_its_test_rows(files, tmp_path):
     assert c["selected"] == MODEL and [r["conditions"]["current"] for r in c["records"]] == [0.5, 1.0]
     row = next(r for r in c["rows"] if r["model"] == MODEL)
     assert row["n_records"] == 2 and row["validation"]["mse"] == pytest.approx(row["mse"], rel=1e-9)
+
+
+def test_record_offsets_on_fit_compare_and_loco(files, tmp_path):
+    # the golden device test carries a force offset; with --record-offsets each copy gets its own f0[r]
+    fit, cmp, loco = tmp_path / "fit.json", tmp_path / "cmp.json", tmp_path / "loco.json"
+    assert main(["fit", str(files / "a.csv"), str(files / "b.csv"), "--model", "dahl", "--record-offsets",
+                 "--json", str(fit), "--quiet", "-o", str(tmp_path / "fit.nc")]) == 0
+    f = json.loads(fit.read_text())
+    assert f["record_offsets"] and f["point"]["f0[0]"] == pytest.approx(f["point"]["f0[1]"], rel=1e-4)
+    # two copies of one record: each offset is that record's force_offset fit's f0
+    one = tmp_path / "one.json"
+    assert main(["fit", str(files / "a.csv"), "--model", MODEL, "--json", str(one), "--quiet"]) == 0
+    assert f["point"]["f0[0]"] == pytest.approx(json.loads(one.read_text())["point"]["f0"], rel=1e-4)
+    val = tmp_path / "val.json"
+    assert main(["validate", str(tmp_path / "fit.nc"), str(files / "a.csv"), str(files / "b.csv"),
+                 "--json", str(val)]) == 0
+    v = json.loads(val.read_text())
+    assert v["records"][0]["mse"] == pytest.approx(f["records"][0]["mse"], rel=1e-3)
+    assert main(["compare", str(files / "a.csv"), str(files / "b.csv"), "--models", "dahl", "--engines", "lsq",
+                 "--record-offsets", "--json", str(cmp), "--quiet"]) == 0
+    row = json.loads(cmp.read_text())["rows"][0]
+    assert row["point"]["f0[1]"] == pytest.approx(f["point"]["f0[1]"], rel=1e-9)
+    assert main(["validate", "--loco", str(files / "m.csv"), "--model", "dahl", "--record-offsets",
+                 "--json", str(loco), "--quiet"]) == 0
+    table = json.loads(loco.read_text())["table"]
+    assert len(table) == 3 and all(r["force_nrmse"] < 0.05 for r in table)
