@@ -208,7 +208,8 @@ def _as_set(records) -> RecordSet:
 def _matrix(records: RecordSet, model, validate, out_dir, seed: int, say, settings: LSQSettings, noise: str,
             search: Search) -> Diagnosis:
     """The diagnosis of several records by one likelihood (:func:`.matrix.diagnose_matrix`); its held-out
-    conditions are its validation, so ``validate`` is refused; with ``out_dir``, ``diagnose.json``."""
+    conditions are its validation, so ``validate`` is refused; with ``out_dir``, ``diagnose.json``,
+    ``diagnose.md`` and its figures."""
     if validate is not None:
         raise ValueError("diagnose of several records validates on each held-out condition: give the validation "
                          "record as one more record of the set instead of validate=")
@@ -217,10 +218,9 @@ def _matrix(records: RecordSet, model, validate, out_dir, seed: int, say, settin
                          "gain is scored on the force of each test")
     out = diagnose_matrix(records, model, settings=settings, seed=seed, noise=noise, say=say,
                           names=search.candidates, threshold=search.threshold,
-                          max_effects=search.max_effects, forms=FORMS)
+                          max_effects=search.max_effects, forms=FORMS, out_dir=out_dir)
     out["seed"] = seed
     if out_dir is not None:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
         (Path(out_dir) / "diagnose.json").write_text(json.dumps(out, indent=2))
     return Diagnosis(out, {})
 

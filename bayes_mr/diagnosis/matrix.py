@@ -28,14 +28,17 @@ import numpy as np
 
 from bayes_mr.data.records import RecordSet
 from bayes_mr.diagnosis.fits import MAX_NFEV, Fit, costs, predict, record_mse, residual_rms
-from bayes_mr.diagnosis.ranking import rank
+from bayes_mr.diagnosis.residuals import residual_views
+from bayes_mr.diagnosis.ranking import Z_AMBIGUOUS, long_run_variance, rank
+from bayes_mr.diagnosis.unexplained import FLOOR_RATIO
+from bayes_mr.inference.lsq.evidence_scale import at_common_scale
 from bayes_mr.diagnosis.screen import (STALL, THRESHOLD, Candidate, applicable, effect_ranges, effect_starts, passes,
                                        scored)
 from bayes_mr.inference.identify import by_condition as condition_scores
 from bayes_mr.inference.lsq.joint import JointResiduals, fit_joint, laplace_joint
 from bayes_mr.inference.lsq.least_squares import LSQSettings
 from bayes_mr.inference.lsq.refine import refine
-from bayes_mr.likelihood.joint import JointLikelihood
+from bayes_mr.likelihood.joint import OFFSET, JointLikelihood
 from bayes_mr.models import EFFECTS, NONE, Model, get_model
 from bayes_mr.selection.loco import condition_folds
 
@@ -65,8 +68,7 @@ def _split(sigma: np.ndarray, lik: JointLikelihood) -> list[np.ndarray]:
 def finish(lik: JointLikelihood, res) -> Fit:
     """A joint fit as a :class:`~.fits.Fit`: ``predicted`` is one dict of channels per record, ``mse`` the
     records' scores (:func:`~.fits.record_mse`) averaged with their valid samples as weights."""
-    theta = lik.par.full(res.phi)
-    predicted = [predict(lik.model, rec, theta) for rec in lik.records]
+    predicted = [predict(lik.record_model(r), rec, lik.record_theta(res.phi, r)) for r, rec in enumerate(lik.records)]
     if any(p is None for p in predicted):
         raise RuntimeError(f"{lik.model.name}: the fitted model diverges on one of its records")
     n = np.array([p.n_valid for p in lik.parts], float)
@@ -74,19 +76,21 @@ def finish(lik: JointLikelihood, res) -> Fit:
     return Fit(lik.model, lik, res, predicted, mse)
 
 
-def fit_baseline(records: RecordSet, model: Model | str, settings: LSQSettings, noise: str = "iid") -> Fit:
-    """The baseline fitted from scratch on every record by one likelihood (:func:`~.lsq.joint.fit_joint`)."""
-    lik = JointLikelihood(get_model(model), list(records), residual=noise)
+def fit_baseline(records: RecordSet, model: Model | str, settings: LSQSettings, noise: str = "iid",
+                 record_offsets: bool = False) -> Fit:
+    """The baseline fitted from scratch on every record by one likelihood (:func:`~.lsq.joint.fit_joint`);
+    ``record_offsets``: with a force offset per record (:class:`~bayes_mr.likelihood.joint.JointLikelihood`)."""
+    lik = JointLikelihood(get_model(model), list(records), residual=noise, record_offsets=record_offsets)
     return finish(lik, fit_joint(lik, replace(settings, input_noise_replicas=0)))
 
 
 def select_baseline(records: RecordSet, forms: tuple[str, ...], settings: LSQSettings, noise: str,
-                    say) -> tuple[Fit, list[dict]]:
+                    say, record_offsets: bool = False) -> tuple[Fit, list[dict]]:
     """Each of ``forms`` fitted jointly; the one of highest Laplace evidence, and one row per form."""
     fits, rows = [], []
     for name in forms:
         try:
-            f = fit_baseline(records, name, settings, noise)
+            f = fit_baseline(records, name, settings, noise, record_offsets)
         except (RuntimeError, ValueError) as exc:
             rows.append({"model": name, "log_evidence": None, "mse": None, "error": str(exc)})
             continue
@@ -146,21 +150,23 @@ def extend(records: RecordSet, base: Fit, effect, *, seed: int = 0, noise: str =
     (:func:`.screen.effect_starts`; the nested start and the cheapest other refined), scored against ``base``."""
     model = base.model + effect
     try:
-        lik = JointLikelihood(model, list(records), ranges=_ranges(model, records, base.lik), residual=noise)
+        lik = JointLikelihood(model, list(records), ranges=_ranges(model, records, base.lik), residual=noise,
+                              record_offsets=base.lik.record_offsets)
         starts = effect_starts(lik, base.params(), effect, seed)
         sds = _split(base.result.sigma, base.lik)
-        c = sum(costs(p, starts, sd) for p, sd in zip(lik.parts, sds))
+        c = sum(costs(p, lik.part_phi(starts, r), sd) for r, (p, sd) in enumerate(zip(lik.parts, sds)))
         runs = []
         for j in ([0] + [int(k) for k in np.argsort(c) if k != 0])[:2]:
             if np.isfinite(c[j]):
-                res = refine(lik, starts[j], None, MAX_NFEV, stall=STALL, residuals=JointResiduals(lik.parts, sds))
+                res = refine(lik, starts[j], None, MAX_NFEV, stall=STALL,
+                             residuals=JointResiduals(lik.parts, sds, lik))
                 runs.append({"start": j, "cost0": float(0.5 * c[j]), "cost": float(res.cost), "phi": res.x})
         if not runs:
             raise RuntimeError(f"{model.name}: every start diverged")
         phi = min(runs, key=lambda r: r["cost"])["phi"]
         # re-weighted by each record's own residual RMS, as every fit diagnose compares is (:func:`.fits.converge`)
-        ml = [residual_rms(p, phi) for p in lik.parts]
-        phi = refine(lik, phi, None, MAX_NFEV, residuals=JointResiduals(lik.parts, ml)).x
+        ml = [residual_rms(p, lik.part_phi(phi, r)) for r, p in enumerate(lik.parts)]
+        phi = refine(lik, phi, None, MAX_NFEV, residuals=JointResiduals(lik.parts, ml, lik)).x
         ext = finish(lik, laplace_joint(lik, phi, replicas=0))
     except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         return Candidate(effect.name, effect, None, -math.inf, error=str(exc))
@@ -168,20 +174,45 @@ def extend(records: RecordSet, base: Fit, effect, *, seed: int = 0, noise: str =
 
 
 def _fold_predictions(f: Fit, records: RecordSet, folds: list[int]) -> list[dict]:
-    """Each record's prediction by ``f``'s model refitted without the record's condition (warm, :data:`FOLD_NFEV`)."""
+    """Each record's prediction by ``f``'s model refitted without the record's condition (warm, :data:`FOLD_NFEV`).
+
+    With record offsets, a held-out record's offset is a nuisance of that test the other tests cannot predict:
+    it is profiled on the record itself (:func:`_profiled`), for the baseline and the extension alike.
+    """
     sds = _split(f.result.sigma, f.lik)
+    offsets = f.lik.record_offsets
     out: list[dict | None] = [None] * len(records)
     for fold in range(max(folds) + 1):
         keep = [j for j in range(len(records)) if folds[j] != fold]
         sub = JointLikelihood(f.model, [records[j] for j in keep], ranges=f.lik.ranges, fixed=f.lik.fixed,
-                              residual=f.lik.parts[0].residual.kind)
+                              residual=f.lik.parts[0].residual.kind, record_offsets=offsets)
         theta = f.params()
+        # the kept records' offsets are f0[j] of the full fit, relabelled by their place in the fold
+        if offsets:
+            theta.update(zip(sub.offset_names, [theta[f.lik.offset_names[j]] for j in keep]))
         phi0 = np.clip(sub.par.coords.to_phi(np.array([theta[n] for n in sub.par.names])), sub.phi_lo, sub.phi_hi)
-        phi = refine(sub, phi0, None, FOLD_NFEV, residuals=JointResiduals(sub.parts, [sds[j] for j in keep])).x
+        phi = refine(sub, phi0, None, FOLD_NFEV,
+                     residuals=JointResiduals(sub.parts, [sds[j] for j in keep], sub)).x
         full = sub.par.full(phi)
         for i in (i for i in range(len(records)) if folds[i] == fold):
-            out[i] = predict(f.model, records[i], full)
+            out[i] = _profiled(f.lik.record_model(i), records[i], sub.par, phi) if offsets else predict(
+                f.model, records[i], full)
     return out
+
+
+def _profiled(model: Model, record, par, phi: np.ndarray) -> dict | None:
+    """``model`` (``BASE+force_offset``) on ``record`` at the shared φ of ``par``, its offset f0 [N] at the mean
+    force residual over the valid samples: the least-squares offset of an additive constant."""
+    names = model.param_names(par.kind)
+    shared = dict(zip(model.param_names(par.kind), np.zeros(len(names))))
+    shared.update(zip(par.model.param_names(par.kind), par.full(phi)))
+    theta = np.array([shared[n] for n in names])
+    pred = predict(model, record, theta)
+    if pred is None:
+        return None
+    valid = record["valid"].values.astype(bool)
+    theta[names.index(OFFSET)] = float(np.mean((record["force"].values - pred["force"])[valid]))
+    return predict(model, record, theta)
 
 
 def held_out(records: RecordSet, base_pred: list, pred: list, training_gain: float) -> dict:
@@ -225,7 +256,8 @@ def by_condition(records: RecordSet, fits: dict[str, Fit]) -> list[dict]:
 
 def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: LSQSettings, seed: int = 0,
                     noise: str = "iid", say=lambda msg: None, names: tuple[str, ...] | None = None,
-                    threshold: float = THRESHOLD, max_effects: int = 3, forms: tuple[str, ...] = ()) -> dict:
+                    threshold: float = THRESHOLD, max_effects: int = 3, forms: tuple[str, ...] = (),
+                    record_offsets: bool | None = None, out_dir=None) -> dict:
     """The diagnosis of a matrix (module docstring): the JSON keys of :func:`.diagnose.diagnose` on a set.
 
     Parameters
@@ -250,39 +282,59 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
         Most effects added (forward selection: each round re-screens the rest on the model so far).
     forms : tuple of str
         Forms compared when ``model`` is None.
+    record_offsets : bool, optional
+        A force offset per record in every fit (:class:`~bayes_mr.likelihood.joint.JointLikelihood`), a
+        nuisance of each test: an offset in one test is absorbed there, and ``force_offset`` is not screened
+        (the per-record offsets nest it). Default: the set's own
+        (:attr:`~bayes_mr.data.records.RecordSet.record_offsets`).
+    out_dir : path, optional
+        Write ``diagnose.md`` and its figures here (:func:`.report.write_matrix_report`); the JSON then
+        carries ``figures`` and ``report``.
     """
     t0 = _time.perf_counter()
+    offsets = bool(getattr(records, "record_offsets", False)) if record_offsets is None else bool(record_offsets)
     if model is None:
-        base, baselines = select_baseline(records, forms, settings, noise, say)
+        base, baselines = select_baseline(records, forms, settings, noise, say, offsets)
     else:
-        base, baselines = fit_baseline(records, model, settings, noise), None
+        base, baselines = fit_baseline(records, model, settings, noise, offsets), None
     say(f"baseline {base.name} on {len(records)} records: MSE {base.mse:.4g}")
     folds = condition_folds(records)
     first = held = _fold_predictions(base, records, folds) if max(folds) > 0 else None
-    current, selected, rounds = base, [], []
+    current, selected, rounds, screened = base, [], [], []
     for _ in range(max_effects):
         have = {c.name for c, _ in selected}
-        offered = [e for e in candidates(current.model, records, names) if e.name not in have]
+        offered = [e for e in candidates(current.model, records, names)
+                   if e.name not in have and not (offsets and e.name == "force_offset")]
         if not offered:
             break
-        rows, chosen, pred = _round(records, current, offered, folds, held, seed=seed, noise=noise,
-                                    threshold=threshold, say=say)
+        rows, chosen, pred, pairs = _round(records, current, offered, folds, held, seed=seed, noise=noise,
+                                           threshold=threshold, say=say)
         rounds.append(rows)
+        screened.append(pairs)
         if chosen is None:
             break
         selected.append((chosen, next(r for r in rows if r["selected"])))
         current, held = chosen.fit, pred
     total = held_out(records, first, held, 1.0 - current.mse / base.mse) if selected else None
-    return _report(records, base, baselines, selected, rounds, total, folds, threshold, t0)
+    out = _report(records, base, baselines, selected, rounds, total, folds, threshold, t0,
+                  screened=screened[0] if screened else [])
+    if out_dir is not None:
+        from bayes_mr.diagnosis.report import write_matrix_report
+
+        paths = write_matrix_report(out, records, base, selected[-1][0].fit if selected else base, out_dir)
+        out.update(figures={k: str(v) for k, v in paths.items() if k != "report"}, report=str(paths["report"]))
+        out["wall_s"] = round(_time.perf_counter() - t0, 2)
+    return out
 
 
 def _round(records: RecordSet, current: Fit, offered: list, folds: list[int], held: list | None, *, seed: int,
-           noise: str, threshold: float, say) -> tuple[list[dict], Candidate | None, list | None]:
+           noise: str, threshold: float, say) -> tuple[list[dict], Candidate | None, list | None, list[tuple]]:
     """One round of forward selection on the matrix: every offered effect fitted on ``current`` and ranked
     (:func:`.ranking.rank`); each passing one's held-out gain over ``held`` (``current``'s held-out predictions;
     None when every record is at one condition); the best-ranked that transfers is chosen.
 
-    Returns the round's rows (the ``causes`` entries), the chosen candidate (or None) and its held-out predictions.
+    Returns the round's rows (the ``causes`` entries), the chosen candidate (or None), its held-out predictions,
+    and (candidate, row) per ranked effect (what :func:`ambiguity` tests the cause against).
     """
     ranked = rank([extend(records, current, e, seed=seed, noise=noise) for e in offered], threshold)
     rows, chosen, chosen_pred = [], None, None
@@ -299,13 +351,74 @@ def _round(records: RecordSet, current: Fit, offered: list, folds: list[int], he
                 chosen, chosen_pred, row["selected"] = c, pred, True
             say(f"  {c.name}: training gain {row['training_gain']:.3g}, held-out gain {row['held_out_gain']:.3g}")
         rows.append(row)
-    return rows, chosen, chosen_pred
+    return rows, chosen, chosen_pred, list(zip(ranked, rows))
+
+
+def pointwise(f: Fit) -> list[np.ndarray]:
+    """Per record of a joint fit: ln p(y_t | θ̂) of each valid sample, summed over channels (n_valid_r,)
+    (:func:`.ranking.pointwise` of each record, with its own σ_r and residual model)."""
+    out = []
+    for part, pred, sigma in zip(f.lik.parts, f.predicted, _split(f.result.sigma, f.lik)):
+        yhat = np.stack([pred[c] for c in part.channels], axis=-1)[None]
+        _, terms = part.log_density(yhat, np.asarray(sigma, float)[None], np.array([True]), pointwise=True)
+        out.append(terms[0].sum(axis=1)[part.valid])
+    return out
+
+
+def compare_joint(a: Fit, b: Fit) -> dict:
+    """Vuong's test of two joint fits (:func:`.ranking.compare_fits` over a matrix): D = ln L(a) − ln L(b)
+    summed over every record's samples, its SD from the Bartlett long-run variances of each record's pointwise
+    differences summed (records are independent blocks; their residuals are autocorrelated within a record only)."""
+    total, var = 0.0, 0.0
+    for da, db in zip(pointwise(a), pointwise(b)):
+        d = da - db
+        if d.size == 0 or not np.all(np.isfinite(d)):
+            return {"difference": None, "sd": None, "z": None}
+        total += float(np.sum(d))
+        var += d.size * long_run_variance(d)
+    sd = math.sqrt(var)
+    z = total / sd if sd > 0 else (math.inf if total > 0 else 0.0)
+    return {"difference": total, "sd": sd, "z": z}
+
+
+def ambiguity(selected: list, screened: list[tuple]) -> dict:
+    """``ambiguous`` and ``alternatives`` of a matrix, by one record's rule (:func:`.ranking.ambiguous`) on the
+    joint likelihood (:func:`compare_joint`): the effects of the first round that pass and transfer (those the
+    held-out conditions did not already tell from the cause) whose joint log-likelihood is within
+    :data:`~.ranking.Z_AMBIGUOUS` SDs of the cause's. Empty when no effect is kept or the cause stands alone."""
+    if not selected:
+        return {"ambiguous": [], "alternatives": []}
+    cause = selected[0][0]
+    ties = []
+    for c, row in screened:
+        if c.name == cause.name or not row.get("transfers") or c.fit is None:
+            continue
+        test = compare_joint(cause.fit, c.fit)
+        if test["z"] is not None and test["z"] < Z_AMBIGUOUS:
+            ties.append({"name": c.name, "extended": _fit_dict(c.fit), "mse_ratio": _num(c.mse_ratio),
+                         "delta_loglik": _num(c.delta_loglik), "held_out_gain": row.get("held_out_gain"),
+                         "difference": _num(test["difference"]), "sd": _num(test["sd"]), "z": _num(test["z"])})
+    return {"ambiguous": [cause.name] + [t["name"] for t in ties] if ties else [], "alternatives": ties}
+
+
+def _calibrated_gain(base: Fit, ext: Fit) -> dict:
+    """``evidence_scale`` and ``delta_log_evidence_calibrated`` of the two joint fits, as one record's diagnosis
+    gives them (their Laplace evidences at the pooled k̄, :func:`~bayes_mr.inference.lsq.evidence_scale.
+    at_common_scale`); None where a fit has no evidence terms."""
+    terms = {"base": base.result.evidence_terms, "ext": ext.result.evidence_terms}
+    pooled = at_common_scale(terms) if None not in terms.values() else None
+    if pooled is None:
+        return {"evidence_scale": None, "delta_log_evidence_calibrated": None}
+    k, ln_z = pooled
+    return {"evidence_scale": _num(k), "delta_log_evidence_calibrated": _num(ln_z["ext"] - ln_z["base"])}
 
 
 def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: list[list[dict]], total: dict | None,
-            folds: list[int], threshold: float, t0: float) -> dict:
-    """The ``diagnose`` JSON keys of a matrix: ``selected`` holds (candidate, its round's row) per effect added,
-    ``total`` the held-out gain of the final model over the baseline (None when nothing was added)."""
+            folds: list[int], threshold: float, t0: float, screened: list[tuple] = ()) -> dict:
+    """The ``diagnose`` JSON keys of a matrix: one record's keys (``ambiguous`` and ``alternatives`` by
+    :func:`ambiguity`) and the matrix's. ``selected`` holds (candidate, its round's row) per effect added,
+    ``total`` the held-out gain of the final model over the baseline (None when nothing was added), ``screened``
+    the first round's (candidate, row) pairs."""
     names = [c.name for c, _ in selected]
     ext = selected[-1][0].fit if selected else base
     notes = [f"{r['name']}: {r['note']}" for rows in rounds for r in rows if "note" in r]
@@ -316,21 +429,37 @@ def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: li
     fits = {"baseline": base} if not selected else {"baseline": base, "extended": ext}
     gain = total["held_out_gain"] if total else None
     table = by_condition(records, fits)
+    unexplained = _unexplained(ext)
+    worst = max((u["ratio"] for u in unexplained.values() if u["ratio"] is not None), default=None)
+    first = base.lik.parts[0].inputs
     return {
+        "record": {"source": records.source or "; ".join(records.files), "kind": records.kind,
+                   "samples": int(sum(r.sizes["time"] for r in records)),
+                   "fs": float(records[0].attrs["fs"]),
+                   "duration_s": float(sum(r.sizes["time"] / float(r.attrs["fs"]) for r in records))},
         "n_records": len(records), "records": records.describe(), "folds": folds, "n_folds": max(folds) + 1,
+        "record_offsets": base.lik.record_offsets,
         "masked": int(sum((~r["valid"].values.astype(bool)).sum() for r in records)),
         "baseline": _fit_dict(base), "baselines": baselines,
-        "cause": names[0] if names else NONE, "effects": names, "causes": rounds[0] if rounds else [],
+        "cause": names[0] if names else NONE, **ambiguity(selected, list(screened)),
+        "effects": names, "causes": rounds[0] if rounds else [],
         "selection": [dict(round=i + 1, **row) for i, (_, row) in enumerate(selected)],
         "extended": _fit_dict(ext),
         "gain": {"mse_ratio": _num(ext.mse / base.mse),
                  "delta_log_evidence": _num(ext.result.log_evidence - base.result.log_evidence),
+                 **_calibrated_gain(base, ext),
+                 "delta_score": _num(sum(c.score for c, _ in selected)) if selected else 0.0,
                  "training_gain": _num(1.0 - ext.mse / base.mse), "held_out_gain": gain,
                  "held_out_mse_ratio": total["held_out_mse_ratio"] if total else None,
                  "validation_mse_ratio": None},
         "held_out_gain": gain, "transfers": bool(selected),
         "by_condition": table, "worst_condition": _worst(table), "validation": None, "threshold": threshold,
-        "verdict": verdict, "unexplained": _unexplained(ext),
+        "verdict": verdict, "unexplained": unexplained, "unexplained_ratio": worst,
+        "at_noise_floor": worst is not None and worst <= FLOOR_RATIO, "floor_ratio_threshold": FLOOR_RATIO,
+        "input_interp": first.interp, "command_interp": first.command_interp,
+        "terms": None,  # the term search scans one record's residual: it does not run on a matrix
+        "residuals": {label: [residual_views(rec, f.predicted[i]).summary() for i, rec in enumerate(records)]
+                      for label, f in (("before", base), ("after", ext))},
         "wall_s": round(_time.perf_counter() - t0, 2),
     }
 
@@ -347,7 +476,8 @@ def _worst(table: list[dict]) -> dict:
 def _unexplained(f: Fit) -> dict:
     """Channel → the final model's residual RMS over each record's noise floor: ``ratio`` (the worst record)
     and ``by_record``."""
-    each = [residual_rms(p, f.phi) / np.asarray(p.noise_sd, float) for p in f.lik.parts]
+    each = [residual_rms(p, f.lik.part_phi(f.phi, r)) / np.asarray(p.noise_sd, float)
+            for r, p in enumerate(f.lik.parts)]
     return {c: {"ratio": _num(max(e[j] for e in each)), "by_record": [_num(e[j]) for e in each]}
             for j, c in enumerate(f.lik.channels)}
 

@@ -2,6 +2,9 @@
 only when it predicts the conditions it was not fitted on (leave-one-condition-out held-out gain)."""
 
 import json
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,7 +14,9 @@ from bayes_mr.data import write_record
 from bayes_mr.data.records import RecordSet
 from bayes_mr.diagnosis.diagnose import diagnose
 from bayes_mr.diagnosis.inflation import design_effect
-from bayes_mr.diagnosis.matrix import NOT_TRANSFERRED
+from bayes_mr.diagnosis.matrix import NOT_TRANSFERRED, ambiguity, compare_joint, fit_baseline
+from bayes_mr.diagnosis.ranking import compare_fits
+from bayes_mr.inference.lsq.least_squares import LSQSettings
 from bayes_mr.diagnosis.search import Search
 from bayes_mr.likelihood.joint import JointLikelihood
 from bayes_mr.likelihood.output_error import OutputError
@@ -137,3 +142,95 @@ def test_a_current_law_is_named_on_a_constant_current_matrix():
     assert d["extended"]["params"]["a_v"] == pytest.approx(2.0, rel=0.1)
     assert d["extended"]["params"]["c_v"] == pytest.approx(400.0, rel=0.1)
     assert [r["command_value"] for r in d["by_condition"]] == [0.0, 1.0, 0.0, 1.0]
+
+
+def test_an_offset_of_one_test_is_absorbed_by_its_nuisance():
+    # the load-cell bias of the test above, with a force offset per record: the baseline holds it in that test's
+    # f0[2], and no effect is named for it (force_offset, which the offsets nest, is not screened)
+    records = [_test(i, a, f, f0=6.0 if i == 2 else 0.0, periods=8 if i == 2 else 1)
+               for i, (a, f) in enumerate(MATRIX)]
+    d = diagnose(replace(_set(records), record_offsets=True), "dahl",
+                 search=Search(candidates=("force_offset", "asymmetry", "cubic_stiffness")), progress=False).to_dict()
+    assert d["record_offsets"] and d["cause"] == "none" and d["effects"] == [] and d["ambiguous"] == []
+    assert "force_offset" not in {c["name"] for c in d["causes"]}
+    p, sd = d["baseline"]["params"], d["baseline"]["params_sd"]
+    for r in range(4):
+        truth = 6.0 if r == 2 else 0.0
+        assert abs(p[f"f0[{r}]"] - truth) < 3 * sd[f"f0[{r}]"], (r, p[f"f0[{r}]"], sd[f"f0[{r}]"])
+    assert all(row["baseline"]["force_nrmse"] < 0.02 for row in d["by_condition"])  # every test at the noise
+
+
+def test_a_matrix_diagnosis_has_one_records_keys():
+    rec = _test(0, 0.005, 2.0, f0=20.0)
+    kw = dict(search=Search(candidates=("force_offset", "asymmetry")), terms=False, progress=False)
+    alone = diagnose(rec, "dahl", **kw).to_dict()
+    d = diagnose(_set([_test(i, a, f, f0=20.0) for i, (a, f) in enumerate(MATRIX)]), "dahl", **kw).to_dict()
+    assert set(alone) <= set(d) and set(alone["gain"]) <= set(d["gain"])
+    assert d["cause"] == "force_offset" and d["ambiguous"] == [] and d["alternatives"] == []
+    assert d["at_noise_floor"] and d["unexplained_ratio"] < d["floor_ratio_threshold"]
+    assert len(d["residuals"]["before"]) == 4 and d["gain"]["delta_score"] > d["threshold"]
+
+
+def _stub(lik, predicted):
+    """What the Vuong test reads of a joint fit: its likelihood, one prediction per record, each record's σ."""
+    sigma = np.concatenate([np.sqrt(np.mean((p.y[:, 0] - f["force"]) ** 2, keepdims=True))
+                            for p, f in zip(lik.parts, predicted)])
+    return SimpleNamespace(lik=lik, predicted=predicted, result=SimpleNamespace(sigma=sigma))
+
+
+def test_the_matrix_ambiguity_test_sums_each_records_vuong_test():
+    rec = _test(0, 0.005, 2.0)
+    rng = np.random.default_rng(3)
+    truth = {"force": rec["force"].values - 2.0 * rng.standard_normal(rec.sizes["time"])}  # 1 % noise off
+    poor = {"force": truth["force"] + 3.0 * np.sin(np.arange(rec.sizes["time"]) / 7.0)}
+    one, two = OutputError("dahl", rec), JointLikelihood("dahl", [rec, rec])
+    single = compare_fits(*(SimpleNamespace(lik=one, predicted=p, result=SimpleNamespace(
+        sigma=_stub(two, [p] * 2).result.sigma[:1])) for p in (truth, poor)))
+    joint = compare_joint(_stub(two, [truth] * 2), _stub(two, [poor] * 2))
+    # two independent copies of a record: D doubles, and so does its long-run variance (independent blocks)
+    assert joint["difference"] == pytest.approx(2 * single["difference"], rel=1e-12)
+    assert joint["sd"] == pytest.approx(np.sqrt(2) * single["sd"], rel=1e-12)
+    assert joint["z"] > 10
+
+
+def test_ambiguous_effects_on_a_matrix_are_those_that_transfer_and_tie():
+    records = _set([_test(i, a, f) for i, (a, f) in enumerate(MATRIX[:2])])
+    base = fit_baseline(records, "dahl", LSQSettings())
+    rng = np.random.default_rng(4)
+
+    def moved(scale, smooth=False):
+        n = records[0].sizes["time"]
+        wiggle = (lambda: np.sin(np.arange(n) / 7.0)) if smooth else (lambda: rng.standard_normal(n))
+        return replace(base, predicted=[{**p, "force": p["force"] + scale * wiggle()} for p in base.predicted])
+
+    cand = lambda name, fit: SimpleNamespace(name=name, fit=fit, mse_ratio=0.5, delta_loglik=100.0)
+    cause = cand("cause", base)
+    screened = [(cause, {"transfers": True}), (cand("twin", moved(0.02)), {"transfers": True}),
+                (cand("local", moved(0.02)), {"transfers": False}),  # told apart by the held-out conditions
+                (cand("poor", moved(3.0, smooth=True)), {"transfers": True})]
+    out = ambiguity([(cause, {})], screened)
+    assert out["ambiguous"] == ["cause", "twin"]
+    (alt,) = out["alternatives"]
+    assert alt["name"] == "twin" and abs(alt["z"]) < 1.96 and alt["extended"]["model"] == "dahl"
+    assert ambiguity([], screened) == {"ambiguous": [], "alternatives": []}
+
+
+def test_diagnose_out_writes_the_matrix_report(tmp_path):
+    d0 = tmp_path / "m"
+    d0.mkdir()
+    files = []
+    for i, (a, f) in enumerate(MATRIX):
+        write_record(_test(i, a, f, f0=6.0 if i == 2 else 0.0), d0 / f"s{i}.csv")
+        files.append(str(d0 / f"s{i}.csv"))
+    out, rep = tmp_path / "d.json", tmp_path / "rep"
+    assert main(["diagnose", *files, "--model", "dahl", "--record-offsets", "--json", str(out), "--out", str(rep),
+                 "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["record_offsets"] and d["cause"] == "none" and d["baseline"]["params"]["f0[2]"] == pytest.approx(6, abs=1)
+    assert json.loads((rep / "diagnose.json").read_text())["cause"] == "none"
+    assert set(d["figures"]) == {"condition_map", "window_worst"}
+    for path in list(d["figures"].values()) + [d["report"]]:
+        assert Path(path).is_file() and Path(path).stat().st_size > 1000
+    text = (rep / "diagnose.md").read_text()
+    assert "f0[r]" in text and "## By condition" in text and "![condition_map](condition_map.png)" in text
+    assert f"record {d['worst_condition']['record']}" in text
