@@ -244,10 +244,12 @@ def validate_records(idata, records: RecordSet | list, *, warmup: float = 0.0,
     about = records.describe() if isinstance(records, RecordSet) else [
         {"file": str(r.attrs.get("source", "")), "role": "test", "conditions": {}} for r in recs]
     out = dict(each[0])
+    out.pop("record_offset", None)  # each record's own, in records
     out.update({k: total[k] for k in keys if k in total}, masked=sum(e["masked"] for e in each),
                wall_s=sum(e["wall_s"] for e in each), validated_on=[e["validated_on"] for e in each],
                n_records=len(each), records=[{**a, **{k: e[k] for k in keys + ("masked", "n", "input_interp",
-                                                                                "command_interp")}}
+                                                                                "command_interp", "record_offset")
+                                                      if k in e}}
                                              for a, e in zip(about, each)])
     if all("force" in r and "displacement" in r for r in recs):
         out["by_condition"] = [{"record": i, "file": a["file"], "role": a["role"],

@@ -99,7 +99,8 @@ def test_a_predicted_test_gets_its_own_offset(tests3):
     idata = Identify("dahl", LeastSquares(n_draws=50)).fit(train, progress=False)
     held = [tests3[2], tests3[2]]
     profiled = validate_records(idata, held)  # the fit had offsets: each predicted record's is profiled on it
-    assert profiled["records"][0]["force_nrmse"] < 0.02
+    assert profiled["records"][0]["force_nrmse"] < 0.02 and "record_offset" not in profiled
+    assert [r["record_offset"] for r in profiled["records"]] == pytest.approx([5.0, 5.0], abs=0.5)
     assert validate_records(idata, [tests3[2]])["record_offset"] == pytest.approx(5.0, abs=0.5)
     bare = validate_records(idata, held, record_offsets=False)  # no offset: 5 N missed
     assert bare["force_nrmse"] > 1.2 * profiled["force_nrmse"]
