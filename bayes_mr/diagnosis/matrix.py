@@ -288,7 +288,7 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
         (the per-record offsets nest it). Default: the set's own
         (:attr:`~bayes_mr.data.records.RecordSet.record_offsets`).
     out_dir : path, optional
-        Write ``diagnose.md`` and its figures here (:func:`.report.write_matrix_report`); the JSON then
+        Write ``diagnose.md`` and its figures here (:func:`.matrix_report.write_matrix_report`); the JSON then
         carries ``figures`` and ``report``.
     """
     t0 = _time.perf_counter()
@@ -319,7 +319,7 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
     out = _report(records, base, baselines, selected, rounds, total, folds, threshold, t0,
                   screened=screened[0] if screened else [])
     if out_dir is not None:
-        from bayes_mr.diagnosis.report import write_matrix_report
+        from bayes_mr.diagnosis.matrix_report import write_matrix_report
 
         paths = write_matrix_report(out, records, base, selected[-1][0].fit if selected else base, out_dir)
         out.update(figures={k: str(v) for k, v in paths.items() if k != "report"}, report=str(paths["report"]))
