@@ -117,7 +117,8 @@ def diagnose(
         test matrix) are diagnosed by one likelihood, and an effect is kept only
         where it predicts the conditions it was not fitted on
         (:mod:`.matrix`: forward selection, ``search``'s candidates, threshold and
-        most effects apply); a set of one is that record.
+        most effects apply; a set with ``record_offsets`` fits a force offset per test,
+        so an offset of one test is absorbed there, not named); a set of one is that record.
     model : Model or str, optional
         Baseline, e.g. ``"dahl"`` or ``"lugre+force_offset"``. Default: the
         form with the highest evidence (:func:`select_baseline`).
