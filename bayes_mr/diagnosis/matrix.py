@@ -288,8 +288,9 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
         (the per-record offsets nest it). Default: the set's own
         (:attr:`~bayes_mr.data.records.RecordSet.record_offsets`).
     out_dir : path, optional
-        Write ``diagnose.md`` and its figures here (:func:`.matrix_report.write_matrix_report`); the JSON then
-        carries ``figures`` and ``report``.
+        Write ``diagnose.md`` and its figures here (:func:`.matrix_report.write_matrix_report`), and the
+        baseline and extended fits as ``baseline.nc`` and ``extended.nc``; the JSON then carries ``figures``,
+        ``report`` and ``results``.
     """
     t0 = _time.perf_counter()
     offsets = bool(getattr(records, "record_offsets", False)) if record_offsets is None else bool(record_offsets)
@@ -321,8 +322,10 @@ def diagnose_matrix(records: RecordSet, model: Model | str | None, *, settings: 
     if out_dir is not None:
         from bayes_mr.diagnosis.matrix_report import write_matrix_report
 
-        paths = write_matrix_report(out, records, base, selected[-1][0].fit if selected else base, out_dir)
-        out.update(figures={k: str(v) for k, v in paths.items() if k != "report"}, report=str(paths["report"]))
+        ext = selected[-1][0].fit if selected else base
+        paths = write_matrix_report(out, records, base, ext, out_dir)
+        out.update(figures={k: str(v) for k, v in paths.items() if k != "report"}, report=str(paths["report"]),
+                   results=_write_results({"baseline": base, "extended": ext}, out_dir, seed))
         out["wall_s"] = round(_time.perf_counter() - t0, 2)
     return out
 
@@ -462,6 +465,19 @@ def _report(records: RecordSet, base: Fit, baselines, selected: list, rounds: li
                       for label, f in (("before", base), ("after", ext))},
         "wall_s": round(_time.perf_counter() - t0, 2),
     }
+
+
+def _write_results(fits: dict[str, Fit], out_dir, seed: int) -> dict[str, str]:
+    """Each joint fit (label → Fit) as ``LABEL.nc``, the InferenceData ``fit --engine lsq`` writes for the set
+    (its Laplace posterior, draws seeded by ``seed``), so ``bayes-mr validate`` predicts other tests with it."""
+    from pathlib import Path
+
+    from bayes_mr.inference import results
+    from bayes_mr.inference.estimators import LeastSquares
+    from bayes_mr.inference.joint_results import build_any
+
+    return {label: str(results.save(build_any(f.lik, LeastSquares().posterior(f.lik, f.result, seed=seed)),
+                                    Path(out_dir) / f"{label}.nc")) for label, f in fits.items()}
 
 
 def _worst(table: list[dict]) -> dict:

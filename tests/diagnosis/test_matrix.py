@@ -234,3 +234,9 @@ def test_diagnose_out_writes_the_matrix_report(tmp_path):
     text = (rep / "diagnose.md").read_text()
     assert "f0[r]" in text and "## By condition" in text and "![condition_map](condition_map.png)" in text
     assert f"record {d['worst_condition']['record']}" in text
+    # the fits as results validate reads: the baseline predicts a test with its own offset profiled
+    assert set(d["results"]) == {"baseline", "extended"}
+    val = tmp_path / "v.json"
+    assert main(["validate", d["results"]["baseline"], files[2], "--json", str(val)]) == 0
+    v = json.loads(val.read_text())
+    assert v["record_offset"] == pytest.approx(6, abs=1) and v["force_nrmse"] < 0.02
