@@ -16,7 +16,7 @@ from numba import prange
 
 from bayes_mr._compile.jit import driver, hot
 from bayes_mr.models.integrate import DECIDE, RK4, ROS2, advance, substeps, work_shape
-from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, rate
+from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, branch_scale, deriv, on_branch, rate
 
 
 @hot(inline="always")
@@ -24,6 +24,14 @@ def _vmax(lay, cst, s, k1, a0, a1, h):
     if lay[L_KIND] == DEVICE:
         return max(abs(a0[1]), abs(a1[1]))
     return abs(s[1]) + abs(k1[1]) * h
+
+
+@hot(inline="always")
+def _velocity(lay, a, s):
+    """ẋ [m/s] at inputs ``a`` and state ``s``: the imposed velocity of a device test, else the state's."""
+    if lay[L_KIND] == DEVICE:
+        return a[1]
+    return s[1]
 
 
 @hot(inline="always")
@@ -39,14 +47,29 @@ def _write_out(lay, cst, p, a, s, f_r, f_d, out):
 
 
 @hot
-def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, end):
+def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, end, s0, k0):
+    """Every interval of a record (:func:`run_one`); ``s0``, ``k0`` keep an interval's start for a retry.
+
+    Where the hysteretic state starts an interval on a loading branch at saturation
+    (:func:`~bayes_mr.models.kernel.on_branch`), the interval is taken with the sub-steps that its rates need
+    for RK4's stability only (:func:`~bayes_mr.models.kernel.branch_scale`) and kept if the state ends it on the
+    branch too; else (a reversal inside the interval) it is taken again from its start with the accuracy bound's
+    sub-steps. The count taken is written to the schedule, so a replay takes the same steps.
+    """
     ns = lay[L_NS]
     N = inputs.shape[0]
     for q in range(ns):
         s[q] = 0.0
+    ready = False  # the rates at the next row were computed by a branch interval's test
+    f_next = 0.0
+    d_next = 0.0
     for k in range(N):
         t = k * h
-        f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
+        if ready:
+            f_r, f_d = f_next, d_next
+            ready = False
+        else:
+            f_r, f_d = deriv(lay, cst, p, t, inputs[k], s, k1)
         if k % every == 0:
             _write_out(lay, cst, p, inputs[k], s, f_r, f_d, out[k // every])
         if not math.isfinite(f_r):
@@ -68,9 +91,24 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
             n_sub = abs(schedule[k])
             mode = ROS2 if schedule[k] < 0 else RK4
         else:
-            lam = rate(lay, cst, p, t, s, _vmax(lay, cst, s, k1, inputs[k], a1, h))
-            n_sub = substeps(lay, cst, lam, h)
+            vmax = _vmax(lay, cst, s, k1, inputs[k], a1, h)
+            n_sub = substeps(lay, cst, rate(lay, cst, p, t, s, vmax, 1.0), h)
             mode = DECIDE
+            if n_sub > 1 and on_branch(lay, p, s, k1, _velocity(lay, inputs[k], s)):
+                n_br = substeps(lay, cst, rate(lay, cst, p, t, s, vmax, branch_scale(cst)), h)
+                if n_br < n_sub:
+                    for q in range(ns):
+                        s0[q] = s[q]
+                        k0[q] = k1[q]
+                    advance(lay, cst, p, t, h, inputs[k], a1, s, k1, n_br, RK4, work)
+                    f_next, d_next = deriv(lay, cst, p, (k + 1) * h, inputs[k + 1], s, k1)
+                    if on_branch(lay, p, s, k1, _velocity(lay, inputs[k + 1], s)):
+                        schedule[k] = n_br
+                        ready = True
+                        continue
+                    for q in range(ns):
+                        s[q] = s0[q]
+                        k1[q] = k0[q]
         n_ros2 = advance(lay, cst, p, t, h, inputs[k], a1, s, k1, n_sub, mode, work)
         if not use_schedule:
             schedule[k] = -n_ros2 if n_ros2 > 0 else n_sub
@@ -112,10 +150,12 @@ def run_one(lay, cst, p, h, inputs, out, schedule, use_schedule, every=1, hold=F
     # 0.187; spencer's structure step went 135 -> 152 ns. Same arithmetic, same numbers in every tier.
     # a third row (width ≥ 3) holds an interval's end inputs when the command is held
     rows, width = work_shape(lay[L_NS])
-    work = np.zeros((rows + 3, width))
+    # and two more an interval's start state and rates, for a branch interval taken again (_integrate)
+    work = np.zeros((rows + 5, width))
     s = work[rows]
     k1 = work[rows + 1]
-    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, work[rows + 2])
+    return _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work, every, hold, work[rows + 2],
+                      work[rows + 3], work[rows + 4])
 
 
 @driver(parallel=True, nogil=True)  # nogil: fits side by side on threads (executor.local_threads)

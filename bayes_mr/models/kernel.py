@@ -80,7 +80,8 @@ K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the 
 #              (bayes_mr.bench.kernels.simulate_ns_per_step)
 K_STIFF = 6  # RK4 sub-steps per interval above which the interval is tried with ROS2 (models.integrate)
 K_RTOL = 7  # relative error a ROS2 interval may have, else it is taken by RK4
-CONST_SIZE = 8
+K_BRANCH = 8  # how much looser the sub-step bound is on a loading branch at saturation (on_branch); 1: not at all
+CONST_SIZE = 9
 
 
 # --- effects: the command's saturation and lags, velocity-only friction ------------
@@ -433,12 +434,58 @@ def channel(lay, cst, p, a, s, f_r, code):
     return f_r
 
 
+#: How much looser than c_acc the sub-step bound h·λ is on a loading branch at saturation (:func:`on_branch`),
+#: where the sub-steps need RK4's stability, not its accuracy (the constant ``K_BRANCH`` of a simulation) ...
+C_BRANCH = 2.5
+#: ... but never above this h·λ: RK4's stability limit on the negative real axis is 2.785, and :func:`rate` is an
+#: upper estimate of λ (measured on spencer device tests: 1.2-2.5 × the Jacobian's spectral radius at an
+#: interval's start), so the margin holds.
+STABLE_HL = 2.5
+#: How close to its saturation z_s the hysteretic state must be, relative, for :func:`on_branch`: what is left of
+#: a transient, at most this share of the hysteretic force, is what the larger sub-steps may not resolve.
+BRANCH_TOL = 1e-5
+
+
+@hot(inline="always")
+def on_branch(lay, p, s, ds, xd):
+    """True when spencer's hysteretic state sits on a loading branch at its saturation.
+
+    On a loading branch (r·z > 0, r = ẋ − ẏ) the law is ż = r(A − (γ+β)|z|ⁿ), whose fixed point
+    z_s = (A/(γ+β))^{1/n} holds for every r, command and field: the state stays there while the piston moves
+    however fast, and a sub-step needs only RK4's stability to keep it there (its deviations decay), not the
+    accuracy bound h·λ ≤ c_acc that a transition needs. ``ds`` holds the rates at ``s``, ``xd`` is ẋ there [m/s].
+    False for the other forms and when a library term changes spencer's ż (its fixed point is then elsewhere).
+    """
+    if lay[L_FORM] != SPENCER:
+        return False
+    for j in range(N_TERMS):
+        if lay[L_TP + j] >= 0:
+            return False
+    o = lay[L_PFORM]
+    i = lay[L_SFORM]
+    z = s[i + 1]
+    r = xd - ds[i]
+    if r * z <= 0.0:
+        return False
+    zs = math.pow(p[o + 11] / (p[o + 9] + p[o + 10]), 1.0 / p[o + 12])
+    return abs(z) >= (1.0 - BRANCH_TOL) * zs
+
+
+@hot(inline="always")
+def branch_scale(cst):
+    """The factor :func:`rate` takes as ``branch`` on a loading branch: the sub-step bound there is
+    min(``K_BRANCH``·c_acc, :data:`STABLE_HL`) instead of c_acc (never tighter)."""
+    return cst[K_CACC] / max(cst[K_CACC], min(cst[K_BRANCH] * cst[K_CACC], STABLE_HL))
+
+
 @hot
-def rate(lay, cst, p, t, s, vmax):
+def rate(lay, cst, p, t, s, vmax, branch):
     """Upper estimate of the fastest local rate |λ| [1/s] of the dynamics.
 
     Used to choose sub-steps per sample (h·λ ≤ c_acc, :mod:`bayes_mr.models.integrate`). ``vmax`` is the
-    largest |ẋ| expected over the step [m/s]; ``t`` the time [s].
+    largest |ẋ| expected over the step [m/s]; ``t`` the time [s]. ``branch`` scales spencer's hysteretic
+    rates (its z's own rate and z's coupling through ẏ): below 1 where :func:`on_branch` holds, so that those
+    rates are held to the looser bound there (:func:`branch_scale`); 1 elsewhere.
     """
     form = lay[L_FORM]
     o = lay[L_PFORM]
@@ -465,6 +512,7 @@ def rate(lay, cst, p, t, s, vmax):
         zn1 = math.pow(zf, n - 1.0)
         lam = n * zn1 * (gam + bet) * rr
         lam += (A + (gam + bet) * zn1 * zf) * alpha / (c0 + c1)
+        lam *= branch
         lam += k0 / (c0 + c1) + _lag_bound(lay, p, eta)
         damp = c0 * c1 / (c0 + c1)
         if lay[L_PFRAME] >= 0:

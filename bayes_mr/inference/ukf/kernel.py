@@ -107,7 +107,7 @@ def _predict(model, weights, sig, pbuf, m, P, Q, h, a0, a1, t):
             vmax = max(abs(a0[1]), abs(a1[1]))
         else:
             vmax = abs(X[i, 1]) + abs(K1[i, 1]) * h
-        r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax)
+        r_i = rate(lay, cst, TH[i], t, X[i, :ns], vmax, 1.0)
         if r_i > lam:
             lam = r_i
     n_sub = substeps(lay, cst, lam, h)
