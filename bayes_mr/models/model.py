@@ -429,7 +429,7 @@ class Model:
         cst[kernel.K_NMAX] = n_max
         cst[kernel.K_STIFF] = integrate.ROS2_ABOVE if ros2 and self.form.ros2 else np.inf
         cst[kernel.K_RTOL] = integrate.ROS2_RTOL
-        cst[kernel.K_BRANCH] = kernel.C_BRANCH
+        cst[kernel.K_BRANCH] = 1.0
         sf = self.effect("stribeck_friction")
         cst[kernel.K_SMOOTH] = float(sf.options["smooth"]) if sf else 0.1
         return cst

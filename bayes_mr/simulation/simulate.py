@@ -34,6 +34,7 @@ from bayes_mr._compile.specialise import kernel
 from bayes_mr.simulation.inputs import COMMANDS, DRIVE, Inputs
 from bayes_mr.models import Model, get_model
 from bayes_mr.models.drivers import run_batch
+from bayes_mr.models.integrate import steps
 from bayes_mr.numerics.synthetic_noise import as_seed_sequence
 
 #: Output channels of a simulation, by kind of test.
@@ -72,10 +73,10 @@ def note(members: int, replayed: bool, schedules: np.ndarray, n_max: int, wall_s
     with the forward sensitivities (:mod:`bayes_mr.simulation.sensitivity`)."""
     if _TALLY is None:
         return
-    own = schedules[:0] if replayed else schedules
+    own = steps(schedules[:0] if replayed else schedules)
     _TALLY.append({"members": int(members), "replayed": bool(replayed), "sensitivities": bool(sensitivities),
                    "intervals": int(schedules.shape[1]),
-                   "at_cap": int(np.count_nonzero(own >= n_max)), "substeps": int(np.abs(own).sum()),
+                   "at_cap": int(np.count_nonzero(own >= n_max)), "substeps": int(own.sum()),
                    "cap": int(n_max), "wall_s": float(wall_s)})
 
 
@@ -92,8 +93,11 @@ class Simulation:
     schedule : ndarray of int, shape (B, S·(N-1))
         RK4 sub-steps each interval of the simulation grid took (S =
         ``Inputs.upsample``: 1 unless the input is reconstructed band-limited),
-        or minus the number of ROS2 steps where ROS2 took it instead
-        (:mod:`bayes_mr.models.integrate`); replaying it replays both.
+        or minus the number of ROS2 steps where ROS2 took it instead, or
+        :data:`~bayes_mr.models.integrate.BRANCH_CODE` plus the sub-steps where the
+        hysteretic state was held on its loading branch (:mod:`bayes_mr.models.integrate`;
+        :func:`~bayes_mr.models.integrate.steps` gives every interval's count);
+        replaying it replays each method.
     """
 
     outputs: dict[str, np.ndarray]
