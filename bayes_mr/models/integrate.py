@@ -42,9 +42,9 @@ and cut the cost of the packaged damper's least-squares optima 2.5–5×. ``spen
 (``Form.ros2``).
 
 ``spencer``'s own stiff intervals are cheaper another way: where its z sits at saturation on a loading branch, a
-fixed point of the law at any velocity, the driver (:func:`bayes_mr.models.drivers._integrate`) holds RK4's
-sub-steps to stability instead of accuracy (:func:`bayes_mr.models.kernel.on_branch`; half the sub-steps of the
-bench's spencer tests at the same error against a fine reference).
+fixed point of the law at any velocity, the driver (:func:`bayes_mr.models.drivers._integrate`) holds z there
+(:data:`BRANCH` mode; :func:`bayes_mr.models.kernel.on_branch`) and integrates the other states at their own pace
+(a quarter of the sub-steps of the bench's spencer tests at the same error against a fine reference).
 
 Each integrator evaluates the right-hand side from one call site, and ROS2 is a function of its own
 (not inlined into :func:`advance`), so a kernel that inlines :func:`~bayes_mr.models.kernel.deriv`

@@ -120,6 +120,7 @@ def simulate(
     c_acc: float = 1.0,
     n_max: int = 400,
     ros2: bool = True,
+    hold_branch: bool = True,
     schedule: np.ndarray | None = None,
 ) -> Simulation:
     """Simulate ``model`` driven by ``inputs`` for one or many parameter sets.
@@ -141,6 +142,11 @@ def simulate(
         more than :data:`~bayes_mr.models.integrate.ROS2_ABOVE` sub-steps,
         kept where its error test passes (:mod:`bayes_mr.models.integrate`);
         False integrates every interval with RK4, the thesis's integrator.
+    hold_branch : bool
+        Hold ``spencer``'s z at its saturation through an interval on a loading
+        branch, where that is the law's own solution
+        (:func:`~bayes_mr.models.kernel.on_branch`); False integrates it there
+        too, as the UKF's sigma points are.
     schedule : ndarray of int, shape (S·(N-1),), optional
         Replay these sub-steps for every member instead of choosing them (a
         previous :attr:`Simulation.schedule` row of the same inputs).
@@ -159,7 +165,7 @@ def simulate(
         raise ValueError(f"{model.name} ({kind} test) has {n_par} parameters, got {P.shape[1]}")
     B, N = P.shape[0], inputs.n
     lay = model.layout(kind)
-    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max, ros2=ros2)
+    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max, ros2=ros2, hold_branch=hold_branch)
     names = OUTPUT_NAMES[kind]
     out = np.empty((B, N, len(names)))
     failed = np.empty(B, dtype=np.int64)
