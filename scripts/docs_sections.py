@@ -157,6 +157,11 @@ def _spencer_rows(r: dict) -> list[tuple[str, str]]:
                      f"{r[f'{key}_diagnose_s']:.0f} s"))
     rows.append((f"compare, five forms × lsq, {r['spencer_records']['spencer_sine']} (selected "
                  f"{r['spencer_compare']['selected']})", f"{r['spencer_compare_s']:.0f} s"))
+    if "spencer_fresh_fit_s" in r:
+        rows.append((f"a first `bayes-mr fit` on a machine that never ran the package ({r['spencer_fresh_fit_record']}): "
+                     "empty kernel cache, then the same command again",
+                     f"{r['spencer_fresh_fit_s']:.0f} s, then {r['spencer_warm_fit_s']:.0f} s (compile "
+                     f"{r['spencer_compile_s']:.0f} s)"))
     return rows
 
 

@@ -47,6 +47,7 @@ from __future__ import annotations
 import numpy as np
 
 from bayes_mr.likelihood.output_error import OutputError, channel_noise
+from bayes_mr.models.integrate import steps
 from bayes_mr.simulation.simulate import DRIVE, simulate
 from bayes_mr.numerics.stats import hac_bandwidth
 
@@ -92,7 +93,7 @@ def response_replicas(lik: OutputError, phi: np.ndarray, n: int, rng: np.random.
         # (a stiff point on a long record needs hundreds per sample; an interval ROS2 took counts its steps,
         # each ns + 2 right-hand sides against a sub-step's 4 for a device test's few states), never fewer
         # than MIN_DRAWS
-        n = min(n, max(MIN_DRAWS, int(REPLICA_SUBSTEPS // max(int(np.sum(np.abs(sim.schedule))), 1))))
+        n = min(n, max(MIN_DRAWS, int(REPLICA_SUBSTEPS // max(int(np.sum(steps(sim.schedule))), 1))))
     out = np.zeros((n,) + base.shape[1:])
     if not sds:
         return out

@@ -15,8 +15,8 @@ import numpy as np
 from numba import prange
 
 from bayes_mr._compile.jit import driver, hot
-from bayes_mr.models.integrate import DECIDE, RK4, ROS2, advance, substeps, work_shape
-from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, branch_scale, deriv, on_branch, rate
+from bayes_mr.models.integrate import BRANCH, BRANCH_CODE, DECIDE, RK4, ROS2, advance, substeps, work_shape
+from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, on_branch, rate
 
 
 @hot(inline="always")
@@ -51,10 +51,10 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
     """Every interval of a record (:func:`run_one`); ``s0``, ``k0`` keep an interval's start for a retry.
 
     Where the hysteretic state starts an interval on a loading branch at saturation
-    (:func:`~bayes_mr.models.kernel.on_branch`), the interval is taken with the sub-steps that its rates need
-    for RK4's stability only (:func:`~bayes_mr.models.kernel.branch_scale`) and kept if the state ends it on the
-    branch too; else (a reversal inside the interval) it is taken again from its start with the accuracy bound's
-    sub-steps. The count taken is written to the schedule, so a replay takes the same steps.
+    (:func:`~bayes_mr.models.kernel.on_branch`), the interval is taken with that state held there and the
+    sub-steps the other states' rates need, and kept if the state ends it on the branch too; else (a reversal
+    inside the interval) it is taken again from its start as any other. The schedule records it
+    (:data:`~bayes_mr.models.integrate.BRANCH_CODE` plus its sub-steps), so a replay takes the same steps.
     """
     ns = lay[L_NS]
     N = inputs.shape[0]
@@ -90,20 +90,23 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
         if use_schedule:  # a negative count replays an interval taken in that many ROS2 steps
             n_sub = abs(schedule[k])
             mode = ROS2 if schedule[k] < 0 else RK4
+            if n_sub >= BRANCH_CODE:
+                n_sub -= BRANCH_CODE
+                mode = BRANCH
         else:
             vmax = _vmax(lay, cst, s, k1, inputs[k], a1, h)
             n_sub = substeps(lay, cst, rate(lay, cst, p, t, s, vmax, 1.0), h)
             mode = DECIDE
-            if n_sub > 1 and on_branch(lay, p, s, k1, _velocity(lay, inputs[k], s)):
-                n_br = substeps(lay, cst, rate(lay, cst, p, t, s, vmax, branch_scale(cst)), h)
+            if n_sub > 1 and on_branch(lay, cst, p, s, k1, _velocity(lay, inputs[k], s)):
+                n_br = substeps(lay, cst, rate(lay, cst, p, t, s, vmax, 0.0), h)
                 if n_br < n_sub:
                     for q in range(ns):
                         s0[q] = s[q]
                         k0[q] = k1[q]
-                    advance(lay, cst, p, t, h, inputs[k], a1, s, k1, n_br, RK4, work)
+                    advance(lay, cst, p, t, h, inputs[k], a1, s, k1, n_br, BRANCH, work)
                     f_next, d_next = deriv(lay, cst, p, (k + 1) * h, inputs[k + 1], s, k1)
-                    if on_branch(lay, p, s, k1, _velocity(lay, inputs[k + 1], s)):
-                        schedule[k] = n_br
+                    if on_branch(lay, cst, p, s, k1, _velocity(lay, inputs[k + 1], s)):
+                        schedule[k] = BRANCH_CODE + n_br
                         ready = True
                         continue
                     for q in range(ns):

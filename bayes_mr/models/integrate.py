@@ -42,9 +42,9 @@ and cut the cost of the packaged damper's least-squares optima 2.5–5×. ``spen
 (``Form.ros2``).
 
 ``spencer``'s own stiff intervals are cheaper another way: where its z sits at saturation on a loading branch, a
-fixed point of the law at any velocity, the driver (:func:`bayes_mr.models.drivers._integrate`) holds RK4's
-sub-steps to stability instead of accuracy (:func:`bayes_mr.models.kernel.on_branch`; half the sub-steps of the
-bench's spencer tests at the same error against a fine reference).
+fixed point of the law at any velocity, the driver (:func:`bayes_mr.models.drivers._integrate`) holds z there
+(:data:`BRANCH` mode; :func:`bayes_mr.models.kernel.on_branch`) and integrates the other states at their own pace
+(a quarter of the sub-steps of the bench's spencer tests at the same error against a fine reference).
 
 Each integrator evaluates the right-hand side from one call site, and ROS2 is a function of its own
 (not inlined into :func:`advance`), so a kernel that inlines :func:`~bayes_mr.models.kernel.deriv`
@@ -57,9 +57,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from bayes_mr._compile.jit import hot
 from bayes_mr.models.kernel import (
-    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, coil_step, deriv, deriv_pow,
+    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, branch_state, coil_step, deriv,
+    deriv_pow, saturation,
 )
 from bayes_mr.models.power import point_powers
 
@@ -159,8 +162,19 @@ ROS2_ABOVE = 2
 #: intervals; 1e-4 kept fewer for no gain, and at 1e-2 a stiff spencer device test's error grew five-fold.
 ROS2_RTOL = 1e-3
 
-#: ``mode`` of :func:`advance`: choose by the error test, RK4, or ROS2 (the last two replay a schedule).
-DECIDE, RK4, ROS2 = 0, 1, 2
+#: ``mode`` of :func:`advance`: choose by the error test, RK4, or ROS2 (the last two replay a schedule), or RK4 with
+#: the hysteretic state held on its loading branch (:func:`~bayes_mr.models.kernel.on_branch`).
+DECIDE, RK4, ROS2, BRANCH = 0, 1, 2, 3
+#: A schedule's entry for an interval taken in ``BRANCH`` mode: this plus its RK4 sub-steps (above any sub-step cap).
+BRANCH_CODE = 1 << 20
+
+
+def steps(schedule: np.ndarray) -> np.ndarray:
+    """The integrator steps of each interval of a schedule (:attr:`~bayes_mr.simulation.simulate.Simulation.schedule`):
+    RK4 sub-steps, ROS2 steps (stored negative) and the sub-steps of a ``BRANCH`` interval (stored plus
+    :data:`BRANCH_CODE`), all as positive counts."""
+    schedule = np.asarray(schedule)
+    return np.where(schedule >= BRANCH_CODE, schedule - BRANCH_CODE, np.abs(schedule))
 
 
 @hot(inline="always")
@@ -315,7 +329,10 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
     :data:`DECIDE` tries ROS2 in a device test where n_sub > ``cst[K_STIFF]``
     and keeps it where its error test passes (:func:`_try_ros2`), else takes
     RK4; :data:`RK4` and :data:`ROS2` force a method (a replayed schedule;
-    with ROS2, ``n_sub`` is its number of steps). Returns the number of ROS2
+    with ROS2, ``n_sub`` is its number of steps); :data:`BRANCH` is RK4 with
+    the hysteretic state's rate held at 0 and the state set to its saturation
+    at the end (an interval on a loading branch, where that is the law's own
+    solution: :func:`~bayes_mr.models.kernel.on_branch`). Returns the number of ROS2
     steps the interval took, 0 for RK4. RK4's four stages run in one loop
     with one call of :func:`deriv`, so a compiler that inlines it does so
     once, not four times.
@@ -332,6 +349,9 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
     ns = lay[L_NS]
     tmp = work[3]
     am = work[4]
+    iz = branch_state(lay) if mode == BRANCH else -1
+    if iz >= 0:
+        k1[iz] = 0.0
     inv_n = 1.0 / n_sub  # products below, no division per stage
     hs = h * inv_n
     hs6 = hs / 6.0
@@ -351,12 +371,16 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
                     tmp[q] = s[q] + c * hs * kp[q]
             kn = k1 if st == 0 else work[st - 1]
             deriv(lay, cst, p, tj + c * hs, am, tmp, kn)
+            if iz >= 0:
+                kn[iz] = 0.0
         k2 = work[0]
         k3 = work[1]
         k4 = work[2]
         for q in range(ns):
             s[q] += hs6 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
         _after_substep(lay, cst, p, s, a0, a1, am, j, inv_n, hs)
+    if iz >= 0:
+        s[iz] = math.copysign(saturation(lay, p), s[iz])
     return 0
 
 

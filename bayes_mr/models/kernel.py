@@ -80,7 +80,7 @@ K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the 
 #              (bayes_mr.bench.kernels.simulate_ns_per_step)
 K_STIFF = 6  # RK4 sub-steps per interval above which the interval is tried with ROS2 (models.integrate)
 K_RTOL = 7  # relative error a ROS2 interval may have, else it is taken by RK4
-K_BRANCH = 8  # how much looser the sub-step bound is on a loading branch at saturation (on_branch); 1: not at all
+K_BRANCH = 8  # 1: spencer's z is held at its saturation on a loading branch (on_branch); 0: integrated there too
 CONST_SIZE = 9
 
 
@@ -434,48 +434,47 @@ def channel(lay, cst, p, a, s, f_r, code):
     return f_r
 
 
-#: How much looser than c_acc the sub-step bound h·λ is on a loading branch at saturation (:func:`on_branch`),
-#: where the sub-steps need RK4's stability, not its accuracy (the constant ``K_BRANCH`` of a simulation) ...
-C_BRANCH = 2.5
-#: ... but never above this h·λ: RK4's stability limit on the negative real axis is 2.785, and :func:`rate` is an
-#: upper estimate of λ (measured on spencer device tests: 1.2-2.5 × the Jacobian's spectral radius at an
-#: interval's start), so the margin holds.
-STABLE_HL = 2.5
-#: How close to its saturation z_s the hysteretic state must be, relative, for :func:`on_branch`: what is left of
-#: a transient, at most this share of the hysteretic force, is what the larger sub-steps may not resolve.
+#: How close to its saturation z_s the hysteretic state must be, relative, for :func:`on_branch`: the state is set
+#: to z_s there, so this share of the hysteretic force is the most that step moves it (the transient it cuts
+#: short decays at the branch's rate, a few per cent of an interval at the piston speeds where it matters).
 BRANCH_TOL = 1e-5
 
 
 @hot(inline="always")
-def on_branch(lay, p, s, ds, xd):
+def branch_state(lay):
+    """Index in the states of the hysteretic state :func:`on_branch` looks at (spencer's z)."""
+    return lay[L_SFORM] + 1
+
+
+@hot(inline="always")
+def saturation(lay, p):
+    """spencer's z_s = (A/(γ+β))^{1/n}: where its loading branch holds z at any velocity."""
+    o = lay[L_PFORM]
+    return math.pow(p[o + 11] / (p[o + 9] + p[o + 10]), 1.0 / p[o + 12])
+
+
+@hot(inline="always")
+def on_branch(lay, cst, p, s, ds, xd):
     """True when spencer's hysteretic state sits on a loading branch at its saturation.
 
     On a loading branch (r·z > 0, r = ẋ − ẏ) the law is ż = r(A − (γ+β)|z|ⁿ), whose fixed point
-    z_s = (A/(γ+β))^{1/n} holds for every r, command and field: the state stays there while the piston moves
-    however fast, and a sub-step needs only RK4's stability to keep it there (its deviations decay), not the
-    accuracy bound h·λ ≤ c_acc that a transition needs. ``ds`` holds the rates at ``s``, ``xd`` is ẋ there [m/s].
-    False for the other forms and when a library term changes spencer's ż (its fixed point is then elsewhere).
+    z_s = (A/(γ+β))^{1/n} (:func:`saturation`) holds for every r, command and field: the state stays there
+    exactly while the piston moves however fast, so an interval that starts and ends on the branch is integrated
+    with z held at z_s (:mod:`bayes_mr.models.integrate`, mode ``BRANCH``) and the rest of the states at their own
+    pace. ``ds`` holds the rates at ``s``, ``xd`` is ẋ there [m/s]. False for the other forms, when the
+    simulation's constant ``K_BRANCH`` is 0, and when a library term changes spencer's ż (its fixed point is
+    then elsewhere).
     """
-    if lay[L_FORM] != SPENCER:
+    if lay[L_FORM] != SPENCER or cst[K_BRANCH] == 0.0:
         return False
     for j in range(N_TERMS):
         if lay[L_TP + j] >= 0:
             return False
-    o = lay[L_PFORM]
-    i = lay[L_SFORM]
-    z = s[i + 1]
-    r = xd - ds[i]
+    z = s[branch_state(lay)]
+    r = xd - ds[lay[L_SFORM]]
     if r * z <= 0.0:
         return False
-    zs = math.pow(p[o + 11] / (p[o + 9] + p[o + 10]), 1.0 / p[o + 12])
-    return abs(z) >= (1.0 - BRANCH_TOL) * zs
-
-
-@hot(inline="always")
-def branch_scale(cst):
-    """The factor :func:`rate` takes as ``branch`` on a loading branch: the sub-step bound there is
-    min(``K_BRANCH``·c_acc, :data:`STABLE_HL`) instead of c_acc (never tighter)."""
-    return cst[K_CACC] / max(cst[K_CACC], min(cst[K_BRANCH] * cst[K_CACC], STABLE_HL))
+    return abs(z) >= (1.0 - BRANCH_TOL) * saturation(lay, p)
 
 
 @hot
@@ -484,8 +483,7 @@ def rate(lay, cst, p, t, s, vmax, branch):
 
     Used to choose sub-steps per sample (h·λ ≤ c_acc, :mod:`bayes_mr.models.integrate`). ``vmax`` is the
     largest |ẋ| expected over the step [m/s]; ``t`` the time [s]. ``branch`` scales spencer's hysteretic
-    rates (its z's own rate and z's coupling through ẏ): below 1 where :func:`on_branch` holds, so that those
-    rates are held to the looser bound there (:func:`branch_scale`); 1 elsewhere.
+    rates (its z's own rate and z's couplings): 0 where z is held on its branch (:func:`on_branch`), 1 elsewhere.
     """
     form = lay[L_FORM]
     o = lay[L_PFORM]
@@ -520,7 +518,7 @@ def rate(lay, cst, p, t, s, vmax, branch):
             stiff = p[lay[L_PFRAME] + 1]
         else:
             stiff = 0.0
-        coupling = alpha * A
+        coupling = alpha * A * branch
     else:
         z = abs(s[i])
         coef = (p[o + 1] if form == BW else p[o + 2]) * m_s

@@ -415,10 +415,11 @@ class Model:
             lay[kernel.L_TC + j] = c
 
     def constants(self, mass: float | None = None, *, c_acc: float = 1.0, n_max: int = 400,
-                  ros2: bool = True) -> np.ndarray:
+                  ros2: bool = True, hold_branch: bool = True) -> np.ndarray:
         """The float64 constants array the kernel reads (mass, envelope time, step control).
 
-        ``ros2`` False integrates every interval with RK4 (:mod:`bayes_mr.models.integrate`).
+        ``ros2`` False integrates every interval with RK4 (:mod:`bayes_mr.models.integrate`); ``hold_branch``
+        False integrates spencer's z on its loading branches too (:func:`bayes_mr.models.kernel.on_branch`).
         """
         cst = np.zeros(kernel.CONST_SIZE)
         cst[kernel.K_MASS] = float(mass) if mass else 1.0
@@ -429,7 +430,7 @@ class Model:
         cst[kernel.K_NMAX] = n_max
         cst[kernel.K_STIFF] = integrate.ROS2_ABOVE if ros2 and self.form.ros2 else np.inf
         cst[kernel.K_RTOL] = integrate.ROS2_RTOL
-        cst[kernel.K_BRANCH] = kernel.C_BRANCH
+        cst[kernel.K_BRANCH] = 1.0 if hold_branch else 0.0
         sf = self.effect("stribeck_friction")
         cst[kernel.K_SMOOTH] = float(sf.options["smooth"]) if sf else 0.1
         return cst

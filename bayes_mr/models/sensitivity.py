@@ -43,8 +43,9 @@ import numpy as np
 
 from bayes_mr._compile.jit import driver, hot
 from bayes_mr.models import kernel
+from bayes_mr.models.integrate import BRANCH_CODE
 from bayes_mr.models.kernel import (
-    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST,
+    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST, saturation,
 )
 
 #: :func:`bayes_mr.models.kernel.deriv_pow` inlined into this module's loops at numba-IR level, as the simulator's
@@ -210,16 +211,20 @@ def _stage(js, jp, T, K, ns, n_th):
 
 
 @hot
-def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, fs, fp):
+def _interval(lay, cst, p, t, h, a0, a1, n_sub, held, s, S, k, K, T, tmp, am, js, jp, fs, fp):
     """RK4 over one sample interval in ``n_sub`` sub-steps, states ``s`` and sensitivities ``S`` in place.
 
     ``k[0]``, ``K[0]`` hold the rates and their sensitivities at (t, s) on entry. The states follow the
-    operations of :func:`bayes_mr.models.integrate.advance` one for one (same nodes, same inputs, same sums).
+    operations of :func:`bayes_mr.models.integrate.advance` one for one (same nodes, same inputs, same sums);
+    ``held``: its ``BRANCH`` mode, z's rate held at 0 and z set to ±z_s(θ) at the end, so its sensitivity
+    there is that of z_s = (A/(γ+β))^{1/n} and no longer of the state it had.
     """
     ns = lay[L_NS]
     n_th = p.size
     iz = lay[L_SFORM] + 1
     ip = lay[L_PFORM] + 12
+    if held:
+        _hold(k[0], K[0], iz, n_th)
     inv_n = 1.0 / n_sub
     hs = h * inv_n
     hs6 = hs / 6.0
@@ -243,10 +248,33 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
             deriv_pow(lay, cst, p, tj + c * hs, am, tmp, k[st], zn)
             spencer_partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
             _stage(js, jp, T, K[st], ns, n_th)
+            if held:
+                _hold(k[st], K[st], iz, n_th)
         for q in range(ns):
             s[q] += hs6 * (k[0, q] + 2.0 * k[1, q] + 2.0 * k[2, q] + k[3, q])
             for jj in range(n_th):
                 S[q, jj] += hs6 * (K[0, q, jj] + 2.0 * K[1, q, jj] + 2.0 * K[2, q, jj] + K[3, q, jj])
+    if held:
+        o = lay[L_PFORM]
+        zs = saturation(lay, p)
+        s[iz] = math.copysign(zs, s[iz])
+        sz = s[iz]  # ±z_s: its derivatives by γ, β, A, n; by nothing else
+        for jj in range(n_th):
+            S[iz, jj] = 0.0
+        gb = p[o + 9] + p[o + 10]
+        n = p[o + 12]
+        S[iz, o + 9] = -sz / (n * gb)
+        S[iz, o + 10] = -sz / (n * gb)
+        S[iz, o + 11] = sz / (n * p[o + 11])
+        S[iz, o + 12] = -sz * math.log(p[o + 11] / gb) / (n * n)
+
+
+@hot(inline="always")
+def _hold(k, K, iz, n_th):
+    """z's rate and its sensitivities held at 0 (a ``BRANCH`` interval)."""
+    k[iz] = 0.0
+    for jj in range(n_th):
+        K[iz, jj] = 0.0
 
 
 @hot(inline="always")
@@ -279,7 +307,8 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
     dout : ndarray, shape ((N-1)//every + 1, n_θ)
         ∂f_r/∂θ [N per parameter unit] at the same rows.
     schedule : int64 ndarray, shape (N-1,)
-        RK4 sub-steps of each interval, replayed (a base simulation's; all positive: RK4).
+        RK4 sub-steps of each interval, replayed (a base simulation's: no ROS2; plus ``BRANCH_CODE`` where z was held
+        on its branch).
     every, hold : as for :func:`~bayes_mr.models.drivers.run_one`.
 
     Returns
@@ -312,5 +341,9 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
         if hold:  # the command held from row to row + 1 (drivers._integrate)
             end[0], end[1], end[2] = a1[0], a1[1], inputs[row, 2]
             a1 = end
-        _interval(lay, cst, p, t, h, inputs[row], a1, schedule[row], s, S, k, K, T, tmp, am, js, jp, fs, fp)
+        n_sub = schedule[row]
+        held = n_sub >= BRANCH_CODE
+        if held:
+            n_sub -= BRANCH_CODE
+        _interval(lay, cst, p, t, h, inputs[row], a1, n_sub, held, s, S, k, K, T, tmp, am, js, jp, fs, fp)
     return -1

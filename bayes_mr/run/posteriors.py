@@ -43,6 +43,7 @@ from bayes_mr.selection.fit_jobs import (
 from bayes_mr.inference.identify import Emcee, LeastSquares
 from bayes_mr.inference.mcmc.budget import cap_message, over_budget, seconds_text
 from bayes_mr.inference.mcmc.settings import MCMCSettings
+from bayes_mr.models.integrate import steps
 
 if TYPE_CHECKING:
     from bayes_mr.run.plan import Budget
@@ -136,8 +137,8 @@ def evaluation_price(lik, res) -> int:
     sub-steps are set by the model's stiffness at the parameters, which near the posterior's bulk are those of
     the optimum.
     """
-    steps = int(np.abs(lik.simulate(np.atleast_2d(res.phi)).schedule[0]).sum())
-    return max(1, int(float(f"{steps:.{PRICE_FIGURES}g}")))
+    n_steps = int(steps(lik.simulate(np.atleast_2d(res.phi)).schedule[0]).sum())
+    return max(1, int(float(f"{n_steps:.{PRICE_FIGURES}g}")))
 
 
 def pool_spent(pool: float, work: dict[str, dict]) -> str:

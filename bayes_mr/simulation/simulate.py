@@ -34,6 +34,7 @@ from bayes_mr._compile.specialise import kernel
 from bayes_mr.simulation.inputs import COMMANDS, DRIVE, Inputs
 from bayes_mr.models import Model, get_model
 from bayes_mr.models.drivers import run_batch
+from bayes_mr.models.integrate import steps
 from bayes_mr.numerics.synthetic_noise import as_seed_sequence
 
 #: Output channels of a simulation, by kind of test.
@@ -72,10 +73,10 @@ def note(members: int, replayed: bool, schedules: np.ndarray, n_max: int, wall_s
     with the forward sensitivities (:mod:`bayes_mr.simulation.sensitivity`)."""
     if _TALLY is None:
         return
-    own = schedules[:0] if replayed else schedules
+    own = steps(schedules[:0] if replayed else schedules)
     _TALLY.append({"members": int(members), "replayed": bool(replayed), "sensitivities": bool(sensitivities),
                    "intervals": int(schedules.shape[1]),
-                   "at_cap": int(np.count_nonzero(own >= n_max)), "substeps": int(np.abs(own).sum()),
+                   "at_cap": int(np.count_nonzero(own >= n_max)), "substeps": int(own.sum()),
                    "cap": int(n_max), "wall_s": float(wall_s)})
 
 
@@ -92,8 +93,11 @@ class Simulation:
     schedule : ndarray of int, shape (B, S·(N-1))
         RK4 sub-steps each interval of the simulation grid took (S =
         ``Inputs.upsample``: 1 unless the input is reconstructed band-limited),
-        or minus the number of ROS2 steps where ROS2 took it instead
-        (:mod:`bayes_mr.models.integrate`); replaying it replays both.
+        or minus the number of ROS2 steps where ROS2 took it instead, or
+        :data:`~bayes_mr.models.integrate.BRANCH_CODE` plus the sub-steps where the
+        hysteretic state was held on its loading branch (:mod:`bayes_mr.models.integrate`;
+        :func:`~bayes_mr.models.integrate.steps` gives every interval's count);
+        replaying it replays each method.
     """
 
     outputs: dict[str, np.ndarray]
@@ -116,6 +120,7 @@ def simulate(
     c_acc: float = 1.0,
     n_max: int = 400,
     ros2: bool = True,
+    hold_branch: bool = True,
     schedule: np.ndarray | None = None,
 ) -> Simulation:
     """Simulate ``model`` driven by ``inputs`` for one or many parameter sets.
@@ -137,6 +142,11 @@ def simulate(
         more than :data:`~bayes_mr.models.integrate.ROS2_ABOVE` sub-steps,
         kept where its error test passes (:mod:`bayes_mr.models.integrate`);
         False integrates every interval with RK4, the thesis's integrator.
+    hold_branch : bool
+        Hold ``spencer``'s z at its saturation through an interval on a loading
+        branch, where that is the law's own solution
+        (:func:`~bayes_mr.models.kernel.on_branch`); False integrates it there
+        too, as the UKF's sigma points are.
     schedule : ndarray of int, shape (S·(N-1),), optional
         Replay these sub-steps for every member instead of choosing them (a
         previous :attr:`Simulation.schedule` row of the same inputs).
@@ -155,7 +165,7 @@ def simulate(
         raise ValueError(f"{model.name} ({kind} test) has {n_par} parameters, got {P.shape[1]}")
     B, N = P.shape[0], inputs.n
     lay = model.layout(kind)
-    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max, ros2=ros2)
+    cst = model.constants(inputs.mass, c_acc=c_acc, n_max=n_max, ros2=ros2, hold_branch=hold_branch)
     names = OUTPUT_NAMES[kind]
     out = np.empty((B, N, len(names)))
     failed = np.empty(B, dtype=np.int64)

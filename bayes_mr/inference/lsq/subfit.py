@@ -19,6 +19,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.models.integrate import steps
 from bayes_mr.simulation.simulate import Inputs, simulate
 
 #: Parameters in which the restoring force is linear, given the hysteretic state.
@@ -188,7 +189,7 @@ def stiff(schedule: np.ndarray, cap: int | None) -> np.ndarray:
     """
     if cap is None:
         return np.zeros(schedule.shape[0], bool)
-    return np.mean(schedule >= cap, axis=1) > STIFF_FRACTION
+    return np.mean(steps(schedule) >= cap, axis=1) > STIFF_FRACTION
 
 
 def screen(lik: OutputError, n_candidates: int, n_starts: int, seed: int, cap: int | None) -> list[np.ndarray]:
