@@ -16,7 +16,7 @@ def run_study(name, tmp_path, *extra):
 
 def test_studies_are_listed():
     assert {"table-3-2", "numerical-selection", "virtual-shake-table", "chapter5-real-record",
-            "boucwen-benchmark"} <= set(study_names())
+            "boucwen-benchmark", "damper-matrix"} <= set(study_names())
 
 
 def test_table_3_2_quick(tmp_path):
