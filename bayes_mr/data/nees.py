@@ -1,4 +1,5 @@
-"""The packaged NEES MR-damper record: conversion from the raw file and loading.
+"""The packaged records: the NEES MR-damper record (conversion from the raw file and loading), the Bouc–Wen
+benchmark's training record, and a simulated constant-current test matrix (:data:`PACKAGED_MATRICES`).
 
 The raw file (``ranran_50.csv.gz``, NEES-2012-1158 Experiment 3, see
 ``resources/PROVENANCE.md``) has columns ``t`` [s], ``A`` (actuator
@@ -62,6 +63,16 @@ PACKAGED: dict[str, tuple[str, dict[str, str]]] = {
             "notes": "forced test, 750 Hz, 5 periods of 8192 samples (the first from rest); band-limited "
             "output noise of about 8 um RMS; the published test sets are not shipped",
         },
+    ),
+}
+
+#: Packaged test matrices: name → (resource folder holding ``manifest.csv`` and one ``.csv.gz`` per test, what it is).
+PACKAGED_MATRICES: dict[str, tuple[str, str]] = {
+    "damper-matrix-sim": (
+        "damper_matrix_sim",
+        "simulated by bayes_mr (studies/damper_matrix.py, seed 0): spencer with an exponential_saturation current "
+        "law and a small_amplitude_regime; 27 sine tests, 3 amplitudes x 3 frequencies x 3 constant currents, "
+        "400 Hz, force noise 1 % of each test's force SD; see resources/PROVENANCE.md",
     ),
 }
 
@@ -149,8 +160,35 @@ def convert_nees(raw_path: str | os.PathLike, out_path: str | os.PathLike) -> Pa
     return out_path
 
 
-def load_packaged(name: str = "nees-ranran-50", quality: bool | QualityConfig = True) -> xr.Dataset:
-    """Load a measured record that ships with the package.
+def packaged_manifest(name: str = "damper-matrix-sim") -> Path:
+    """The manifest CSV of a test matrix that ships with the package, for every verb that takes a manifest
+    (``bayes-mr fit``, ``validate --loco``, :func:`bayes_mr.data.records.load_records`).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`PACKAGED_MATRICES`.
+
+    Returns
+    -------
+    pathlib.Path
+        ``manifest.csv`` inside the installed package (columns ``file``, ``current [A]``, ``amplitude [mm]``,
+        ``frequency [Hz]``); its records lie beside it.
+
+    Raises
+    ------
+    KeyError
+        An unknown name.
+    """
+    if name not in PACKAGED_MATRICES:
+        raise KeyError(f"no packaged matrix {name!r}; available: {', '.join(PACKAGED_MATRICES)}")
+    folder = resources.files("bayes_mr.data").joinpath("resources", PACKAGED_MATRICES[name][0])
+    # the package is installed as files (setuptools, editable or not): the resource is a real path
+    return Path(str(folder.joinpath("manifest.csv")))
+
+
+def load_packaged(name: str = "nees-ranran-50", quality: bool | QualityConfig = True):
+    """Load a measured record, or a test matrix, that ships with the package.
 
     Parameters
     ----------
@@ -158,18 +196,24 @@ def load_packaged(name: str = "nees-ranran-50", quality: bool | QualityConfig = 
         One of :data:`PACKAGED` (``"nees-ranran-50"``: MR damper, random
         displacement 0–50 Hz, random on/off voltage, 3004.8 Hz, 74,068 samples;
         ``"boucwen-benchmark"``: the Bouc–Wen benchmark's multisine training
-        record, a forced test at 750 Hz, 40,960 samples).
+        record, a forced test at 750 Hz, 40,960 samples) or of :data:`PACKAGED_MATRICES`
+        (``"damper-matrix-sim"``: a simulated constant-current matrix of 27 sine tests).
     quality : bool or QualityConfig
         Run quality control on load (see :func:`bayes_mr.data.load`).
 
     Returns
     -------
-    xarray.Dataset
+    xarray.Dataset or RecordSet
         Record in SI (device test, or forced test for the benchmark); ``source`` = ``name``; provenance attributes
-        (``title``, ``doi``, ``conversion``, …).
+        (``title``, ``doi``, ``conversion``, …). A matrix: its :class:`~bayes_mr.data.records.RecordSet`, read
+        from :func:`packaged_manifest` with each test's current, amplitude and frequency as conditions.
     """
+    if name in PACKAGED_MATRICES:
+        from bayes_mr.data.records import load_records
+
+        return load_records(packaged_manifest(name), quality=quality)
     if name not in PACKAGED:
-        raise KeyError(f"no packaged record {name!r}; available: {', '.join(PACKAGED)}")
+        raise KeyError(f"no packaged record {name!r}; available: {', '.join([*PACKAGED, *PACKAGED_MATRICES])}")
     filename, attrs = PACKAGED[name]
     ref = resources.files("bayes_mr.data").joinpath("resources", filename)
     with resources.as_file(ref) as path:

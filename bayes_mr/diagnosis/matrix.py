@@ -32,8 +32,8 @@ from bayes_mr.diagnosis.residuals import residual_views
 from bayes_mr.diagnosis.ranking import Z_AMBIGUOUS, long_run_variance, rank
 from bayes_mr.diagnosis.unexplained import FLOOR_RATIO
 from bayes_mr.inference.lsq.evidence_scale import at_common_scale
-from bayes_mr.diagnosis.screen import (STALL, THRESHOLD, Candidate, applicable, effect_ranges, effect_starts, passes,
-                                       scored)
+from bayes_mr.diagnosis.screen import (COMPARED_LAWS, STALL, THRESHOLD, Candidate, applicable, effect_ranges,
+                                       effect_starts, passes, scored)
 from bayes_mr.inference.identify import by_condition as condition_scores
 from bayes_mr.inference.lsq.joint import JointResiduals, fit_joint, laplace_joint
 from bayes_mr.inference.lsq.least_squares import LSQSettings
@@ -103,14 +103,24 @@ def select_baseline(records: RecordSet, forms: tuple[str, ...], settings: LSQSet
 
 
 def candidates(model: Model, records: RecordSet, names: tuple[str, ...] | None = None) -> list:
-    """Effects that can extend ``model`` on the matrix: those applicable to any of its records
-    (:func:`.screen.applicable`; the command-dependent ones when the tests' commands differ, :func:`_commands_differ`), and ``small_amplitude_regime`` where the records' amplitudes differ by more
-    than a fifth (a regime across tests); not ``sensor_delay``, whose screen scans one record's lags."""
+    """Effects that can extend ``model`` on the matrix.
+
+    Those applicable to any of its records (:func:`.screen.applicable`; the command-dependent ones when the
+    tests' commands differ, :func:`_commands_differ`); the current laws one record leaves to ``compare``
+    (:data:`.screen.COMPARED_LAWS`) when the tests' constant commands tell their shapes apart (:func:`_laws`);
+    ``small_amplitude_regime`` where the records' amplitudes differ by more than a fifth (a regime across
+    tests); not ``sensor_delay``, whose screen scans one record's lags.
+    """
     seen: dict[str, object] = {}
     varies = _commands_differ(records) or None  # None: each record's own command says
     for rec in records:
         for e in applicable(model, rec, varies):
             seen.setdefault(e.name, e)
+    for name in _laws(model, records):
+        seen.setdefault(name, EFFECTS[name])
+    if any(e.name in CURRENT_LAWS for e in model.effects):
+        # the field has its current law already: a second one would shape the command twice
+        seen = {n: e for n, e in seen.items() if n not in CURRENT_LAWS}
     amps = _amplitudes(records)
     have = {e.name for e in model.effects}
     if "small_amplitude_regime" not in have and max(amps) > 1.2 * min(amps):
@@ -118,15 +128,44 @@ def candidates(model: Model, records: RecordSet, names: tuple[str, ...] | None =
     return [e for n, e in seen.items() if n != "sensor_delay" and (names is None or n in names)]
 
 
-def _commands_differ(records: RecordSet) -> bool:
-    """Whether the tests' constant commands (``current`` or ``voltage``) differ between records: a matrix of
-    constant currents informs the current dependence (``voltage_dependence``) no single test of it does."""
+#: The current laws beside the linear one: each maps the filtered command u to the g(u) every field-dependent
+#: coefficient sees (:func:`bayes_mr.models.kernel._saturate`); a model carries at most one.
+CURRENT_LAWS = ("command_saturation",) + COMPARED_LAWS
+
+#: Distinct non-zero constant commands each law of :data:`.screen.COMPARED_LAWS` needs: a law's g(u) is seen
+#: only through the gain at each command: a one-parameter saturation needs two non-zero levels (the gain and
+#: the shape), the cubic three (the gain and its two coefficients).
+LAW_LEVELS = {"exponential_saturation": 2, "command_polynomial": 3}
+
+
+def _laws(model: Model, records: RecordSet) -> list[str]:
+    """The current laws of :data:`.screen.COMPARED_LAWS` a constant-command matrix can tell apart: on a
+    model with a command path, the tests' commands differing, and enough distinct non-zero commands
+    (:data:`LAW_LEVELS`). A record whose own command varies is screened by :func:`.screen.applicable`."""
+    if not model.commanded:
+        return []
+    levels = _command_levels(records)
+    if len(levels) < 2:
+        return []
+    nonzero = sum(1 for _, v in levels if abs(v) > 1e-9)
+    have = {e.name for e in model.effects}
+    return [n for n in COMPARED_LAWS if n not in have and nonzero >= LAW_LEVELS[n]]
+
+
+def _command_levels(records: RecordSet) -> set[tuple[str, float]]:
+    """The distinct (command name, median value) of the records' command channels [A or V]."""
     values = set()
     for rec in records:
         for name in ("current", "voltage"):
             if name in rec:
                 values.add((name, round(float(np.median(rec[name].values)), 9)))
-    return len(values) > 1
+    return values
+
+
+def _commands_differ(records: RecordSet) -> bool:
+    """Whether the tests' constant commands (``current`` or ``voltage``) differ between records: a matrix of
+    constant currents informs the current dependence (``voltage_dependence``) no single test of it does."""
+    return len(_command_levels(records)) > 1
 
 
 def _amplitudes(records: RecordSet) -> list[float]:

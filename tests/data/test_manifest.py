@@ -72,3 +72,28 @@ def test_bm_load_reads_a_manifest_or_a_list(folder):
     for rs in (bm.load(path), bm.load([folder / "a.csv", folder / "a.csv"], constants={"current": 0.5})):
         assert isinstance(rs, bm.RecordSet) and len(rs) == 2 and float(rs[0]["current"][0]) == 0.5
     assert not isinstance(bm.load(folder / "a.csv"), bm.RecordSet)
+
+
+def test_the_packaged_matrix_loads_with_its_conditions():
+    # the simulated constant-current matrix ships as gzipped CSVs and a manifest: 3 amplitudes × 3 frequencies
+    # × 3 currents, each test's current a command channel, its amplitude and frequency conditions in mm and Hz
+    from itertools import product
+
+    from bayes_mr.data import load_packaged
+    from bayes_mr.data.nees import packaged_manifest
+
+    path = packaged_manifest("damper-matrix-sim")
+    assert is_manifest(path) and path.name == "manifest.csv"
+    matrix = load_packaged("damper-matrix-sim")
+    assert isinstance(matrix, RecordSet) and len(matrix) == 27 and matrix.kind == "device"
+    assert matrix.units == {"current": "A", "amplitude": "mm", "frequency": "Hz"}
+    grid = {(c["amplitude"], c["frequency"], c["current"]) for c in matrix.conditions}
+    assert grid == set(product((2.0, 6.0, 20.0), (0.5, 1.5, 4.0), (0.0, 0.5, 1.0)))
+    for rec, cond in zip(matrix, matrix.conditions):
+        assert np.all(rec["current"].values == cond["current"]) and rec.attrs["command_from"] == "condition"
+        x = rec["displacement"].values
+        assert 0.5 * (x.max() - x.min()) == pytest.approx(1e-3 * cond["amplitude"], rel=1e-3)
+        assert rec["valid"].values.all()  # simulated: nothing for quality control to mask
+    assert [r.sizes["time"] for r in matrix][:3] == [1600, 1600, 1600]
+    with pytest.raises(KeyError, match="damper-matrix-sim"):
+        packaged_manifest("no-such-matrix")

@@ -240,3 +240,33 @@ def test_diagnose_out_writes_the_matrix_report(tmp_path):
     assert main(["validate", d["results"]["baseline"], files[2], "--json", str(val)]) == 0
     v = json.loads(val.read_text())
     assert v["record_offset"] == pytest.approx(6, abs=1) and v["force_nrmse"] < 0.02
+
+
+def _at_currents(currents) -> RecordSet:
+    """Tests of the packaged matrix (6 mm, 1.5 Hz), one per current [A], the current channel set to it."""
+    from bayes_mr.data import load_packaged
+
+    matrix = load_packaged("damper-matrix-sim")
+    base = next(r for r, c in zip(matrix, matrix.conditions) if c["amplitude"] == 6.0 and c["frequency"] == 1.5)
+    recs = [base.assign(current=("time", np.full(base.sizes["time"], float(u)), base["current"].attrs))
+            for u in currents]
+    return RecordSet(tuple(recs), tuple({"current": float(u)} for u in currents), ("train",) * len(recs), "m",
+                     {"current": "A"})
+
+
+def test_a_constant_current_matrix_offers_the_current_laws_it_can_tell_apart():
+    from bayes_mr.diagnosis.matrix import candidates
+
+    def offered(model, currents):
+        return {e.name for e in candidates(get_model(model), _at_currents(currents))}
+
+    # two non-zero currents tell a one-parameter saturation from the linear law, not a cubic's two coefficients
+    three = offered("spencer", (0.0, 0.5, 1.0))
+    assert {"exponential_saturation", "command_saturation"} <= three and "command_polynomial" not in three
+    assert "command_polynomial" in offered("spencer", (0.0, 0.5, 1.0, 1.5))
+    # one current: no current law at all; a model with its law already: no second one
+    assert not {"exponential_saturation", "command_saturation", "command_polynomial"} & offered("spencer", (0.5, 0.5))
+    laws = offered("spencer+exponential_saturation", (0.0, 0.5, 1.0, 1.5))
+    assert not {"exponential_saturation", "command_saturation", "command_polynomial"} & laws
+    # a model without a command path is offered none (dahl: voltage_dependence first)
+    assert not {"exponential_saturation", "command_polynomial"} & offered("dahl", (0.0, 0.5, 1.0, 1.5))
