@@ -80,7 +80,7 @@ K_IMASS = 5  # 1 / K_MASS [1/kg]. Products, not divisions, per stage and in the 
 #              (bayes_mr.bench.kernels.simulate_ns_per_step)
 K_STIFF = 6  # RK4 sub-steps per interval above which the interval is tried with ROS2 (models.integrate)
 K_RTOL = 7  # relative error a ROS2 interval may have, else it is taken by RK4
-K_BRANCH = 8  # 1: spencer's z is held at its saturation on a loading branch (on_branch); 0: integrated there too
+K_BRANCH = 8  # 1: the hysteretic state is held at its saturation on a loading branch (on_branch); 0: integrated
 CONST_SIZE = 9
 
 
@@ -442,36 +442,50 @@ BRANCH_TOL = 1e-5
 
 @hot(inline="always")
 def branch_state(lay):
-    """Index in the states of the hysteretic state :func:`on_branch` looks at (spencer's z)."""
-    return lay[L_SFORM] + 1
+    """Index in the states of the hysteretic state :func:`on_branch` looks at (spencer's z, the others' z or r)."""
+    if lay[L_FORM] == SPENCER:
+        return lay[L_SFORM] + 1
+    return lay[L_SFORM]
 
 
 @hot(inline="always")
 def saturation(lay, p):
-    """spencer's z_s = (A/(γ+β))^{1/n}: where its loading branch holds z at any velocity."""
+    """|z| where a form's loading branch (the state moving with its driving velocity) holds it at any velocity:
+    spencer (A/(γ+β))^{1/n}, Bouc–Wen (β₁+γ)^{−1/n} (none, ∞, where β₁ + γ ≤ 0: a hardening loop grows without
+    a bound), LuGre 1/α, Dahl and the normalized Bouc–Wen 1."""
+    form = lay[L_FORM]
     o = lay[L_PFORM]
-    return math.pow(p[o + 11] / (p[o + 9] + p[o + 10]), 1.0 / p[o + 12])
+    if form == SPENCER:
+        return math.pow(p[o + 11] / (p[o + 9] + p[o + 10]), 1.0 / p[o + 12])
+    if form == BW:
+        bg = p[o + 2] + p[o + 3]
+        return math.pow(1.0 / bg, 1.0 / p[o + 4]) if bg > 0.0 else math.inf
+    if form == LUGRE:
+        return 1.0 / p[o + 4]
+    return 1.0
 
 
 @hot(inline="always")
 def on_branch(lay, cst, p, s, ds, xd):
-    """True when spencer's hysteretic state sits on a loading branch at its saturation.
+    """True when the hysteretic state sits on a loading branch at its saturation.
 
-    On a loading branch (r·z > 0, r = ẋ − ẏ) the law is ż = r(A − (γ+β)|z|ⁿ), whose fixed point
-    z_s = (A/(γ+β))^{1/n} (:func:`saturation`) holds for every r, command and field: the state stays there
-    exactly while the piston moves however fast, so an interval that starts and ends on the branch is integrated
-    with z held at z_s (:mod:`bayes_mr.models.integrate`, mode ``BRANCH``) and the rest of the states at their own
-    pace. ``ds`` holds the rates at ``s``, ``xd`` is ẋ there [m/s]. False for the other forms, when the
-    simulation's constant ``K_BRANCH`` is 0, and when a library term changes spencer's ż (its fixed point is
-    then elsewhere).
+    On a loading branch (r·z > 0, r the velocity that drives the law: spencer's ẋ − ẏ, the others' ẋ) every
+    form's law is r·g(|z|) with g(z_s) = 0 at the saturation :func:`saturation` (spencer's
+    ż = r(A − (γ+β)|z|ⁿ), Bouc–Wen's ṙ = ẋ(1 − (β₁+γ)|r|ⁿ), LuGre's ż = ẋ(1 − α|z|), Dahl's ż = σẋ(1 − |z|),
+    the normalized Bouc–Wen's ż = ρẋ(1 − |z|ⁿ)): a fixed point for every r, command and field, where the state
+    stays exactly while the piston moves however fast. So an interval that starts and ends on the branch is
+    integrated with z held at z_s (:mod:`bayes_mr.models.integrate`, mode ``BRANCH``) and the rest of the states
+    at their own pace. ``ds`` holds the rates at ``s``, ``xd`` is ẋ there [m/s]. False when the simulation's
+    constant ``K_BRANCH`` is 0, with ``low_velocity_rolloff`` (its series dashpot moves the driving velocity with
+    the force) and when a library term changes ż (its fixed point is then elsewhere).
     """
-    if lay[L_FORM] != SPENCER or cst[K_BRANCH] == 0.0:
+    if cst[K_BRANCH] == 0.0 or lay[L_LVR] >= 0:
         return False
     for j in range(N_TERMS):
         if lay[L_TP + j] >= 0:
             return False
     z = s[branch_state(lay)]
-    r = xd - ds[lay[L_SFORM]]
+    r = xd - ds[lay[L_SFORM]] if lay[L_FORM] == SPENCER else xd
     if r * z <= 0.0:
         return False
     return abs(z) >= (1.0 - BRANCH_TOL) * saturation(lay, p)
@@ -482,8 +496,8 @@ def rate(lay, cst, p, t, s, vmax, branch):
     """Upper estimate of the fastest local rate |λ| [1/s] of the dynamics.
 
     Used to choose sub-steps per sample (h·λ ≤ c_acc, :mod:`bayes_mr.models.integrate`). ``vmax`` is the
-    largest |ẋ| expected over the step [m/s]; ``t`` the time [s]. ``branch`` scales spencer's hysteretic
-    rates (its z's own rate and z's couplings): 0 where z is held on its branch (:func:`on_branch`), 1 elsewhere.
+    largest |ẋ| expected over the step [m/s]; ``t`` the time [s]. ``branch`` scales the hysteretic state's
+    rates (its own rate and its couplings): 0 where it is held on its branch (:func:`on_branch`), 1 elsewhere.
     """
     form = lay[L_FORM]
     o = lay[L_PFORM]
@@ -554,7 +568,8 @@ def rate(lay, cst, p, t, s, vmax, branch):
             slope = 1.0 + bg * zn1 * zf
         if lay[L_LVR] >= 0:
             lam += slope * coef / p[lay[L_LVR]]
-        coupling = coef * slope
+        lam *= branch
+        coupling = coef * slope * branch
     if lay[L_VD] >= 0:
         lam += _lag_bound(lay, p, p[lay[L_VD] + 2])
         damp += abs(p[lay[L_VD] + 1]) * u
