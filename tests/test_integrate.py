@@ -48,8 +48,9 @@ def test_stiff_device_tests_keep_the_accuracy_of_rk4(name, values):
     inputs = device_inputs(0.006, fs=1000.0)
     theta = model.theta("device", values)
     ref = reference_simulation(model, "device", theta, inputs)
-    adaptive = simulate(model, inputs, theta)
-    rk4 = simulate(model, inputs, theta, ros2=False)
+    # the states integrated on their loading branches too, where the default holds them (kernel.on_branch)
+    adaptive = simulate(model, inputs, theta, hold_branch=False)
+    rk4 = simulate(model, inputs, theta, ros2=False, hold_branch=False)
     stiff = np.abs(rk4.schedule) > 2
     assert stiff.mean() > 0.3
     assert np.mean(adaptive.schedule[stiff] < 0) > 0.6
@@ -135,25 +136,35 @@ def test_a_non_stiff_record_is_integrated_as_before():
     np.testing.assert_array_equal(sim["force"], simulate(model, inputs, theta, ros2=False)["force"])
 
 
+#: A stiff case of every form for the branch test: the published spencer, and the thesis forms of STIFF_DEVICE.
+HELD = [("spencer", {})] + STIFF_DEVICE[:4]
+
+
 @pytest.mark.parametrize("kind", ["device", "structure"])
-def test_a_saturated_loading_branch_is_held_at_the_same_accuracy(kind):
-    """spencer's z at its saturation on a loading branch stays there however fast the piston moves
-    (kernel.on_branch), so an interval there holds it and integrates the other states at their own pace: far
-    fewer sub-steps (measured 0.23× on the device test, 0.06× on the structure test), and against a fine
-    reference the same error as integrating z everywhere (5.5e-6 and 1.9e-6 of the SD)."""
-    inputs = (device_inputs(0.012, n=2000, fs=1000.0) if kind == "device"
-              else structure_inputs(THESIS_FRAME["accel"] * 20, THESIS_FRAME["mass"], n=2000, fs=1000.0))
+@pytest.mark.parametrize("name,values", HELD, ids=[c[0] for c in HELD])
+def test_a_saturated_loading_branch_is_held_at_the_same_accuracy(name, values, kind):
+    """A hysteretic state at its saturation on a loading branch stays there however fast the piston moves
+    (kernel.on_branch), so an interval there holds it and integrates the other states at their own pace. Against
+    a fine reference the error is that of integrating the state everywhere (measured: equal to three digits),
+    in far fewer sub-steps where RK4 took those intervals (structure tests: 0.06× for spencer, 0.12–0.2× for
+    the thesis forms; spencer's device test 0.23×); where ROS2 took them (the thesis forms' device tests) in
+    about as many steps, each an RK4 sub-step instead of a Rosenbrock step."""
+    inputs = (device_inputs(0.006, n=2000, fs=1000.0) if kind == "device"
+              else structure_inputs(THESIS_FRAME["accel"] * 5, THESIS_FRAME["mass"], n=2000, fs=1000.0))
     channel = "force" if kind == "device" else "acceleration"
-    model = get_model("spencer")
-    theta = model.theta(kind, {})
+    model = get_model(name)
+    theta = model.theta(kind, values)
     held = simulate(model, inputs, theta)
     integrated = simulate(model, inputs, theta, hold_branch=False)
-    ref = simulate(model, inputs, theta, c_acc=0.02, n_max=4000, hold_branch=False)[channel]
+    ref = simulate(model, inputs, theta, c_acc=0.02, n_max=4000, ros2=False, hold_branch=False)[channel]
     err, err_int = _nrmse(held[channel], ref), _nrmse(integrated[channel], ref)
     on = held.schedule[0] >= integrate.BRANCH_CODE
     assert on.mean() > 0.3 and np.all(integrated.schedule < integrate.BRANCH_CODE)
-    n_held, n_int = integrate.steps(held.schedule).sum(), integrate.steps(integrated.schedule).sum()
-    assert n_held < 0.5 * n_int, (n_held, n_int)
     assert err <= 1.2 * err_int + 1e-7, (err, err_int)
+    n_held, n_int = integrate.steps(held.schedule).sum(), integrate.steps(integrated.schedule).sum()
+    if np.all(integrated.schedule > 0):  # RK4 took every interval: the held ones need far fewer sub-steps
+        assert n_held < 0.5 * n_int, (n_held, n_int)
+    else:  # ROS2 took the stiff ones: one RK4 sub-step stands for one Rosenbrock step
+        assert n_held <= 1.05 * n_int, (n_held, n_int)
     # the schedule it wrote replays its numbers
     np.testing.assert_array_equal(simulate(model, inputs, theta, schedule=held.schedule[0])[channel], held[channel])
