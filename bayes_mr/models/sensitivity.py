@@ -44,7 +44,8 @@ import numpy as np
 from bayes_mr._compile.jit import driver, hot
 from bayes_mr.models import kernel
 from bayes_mr.models.kernel import (
-    K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_K3, L_NS, L_PFORM, L_SF, L_SFORM, L_ST,
+    BW, DAHL, K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_FORM, L_K3, L_LVR, L_NS, L_PFORM, L_SF, L_SFORM,
+    L_ST, L_SU, L_VD, LUGRE, NBW, SPENCER, power_slot,
 )
 
 #: :func:`bayes_mr.models.kernel.deriv_pow` inlined into this module's loops at numba-IR level, as the simulator's
@@ -199,6 +200,169 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
 
 
 @hot(inline="always")
+def _via_force(jp, fp, i, j, dfs, dms, g_w, inv_cs, eps_ms, eps_zd):
+    """Column j of a parameter that enters a thesis form through its hysteretic force f_s = m_s·coef·z·a_z only,
+    given dfs = ∂f_s/∂θ_j and dms = ∂m_s/∂θ_j: ż's through the series dashpot's w = ẋ − f_s/c_s
+    (``inv_cs`` = 1/c_s, 0 without low_velocity_rolloff), and f_r's through f_s and LuGre's m_s ε ż
+    (``eps_ms`` = m_s ε, ``eps_zd`` = ε ż; both 0 for the other forms)."""
+    d = -g_w * dfs * inv_cs
+    jp[i, j] = d
+    fp[j] = dfs + eps_ms * d + dms * eps_zd
+
+
+@hot(inline="always")
+def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
+    """Partial derivatives of a thesis form's device-test rates and force (normalized-bouc-wen, dahl, lugre,
+    bouc-wen), as :func:`spencer_partials` writes spencer's.
+
+    The law (:func:`bayes_mr.models.kernel.deriv`): f_s = m_s coef z a_z (coef = k_z, F_d, β or, for
+    bouc-wen, k), w = ẋ − f_s/c_s (ẋ without low_velocity_rolloff), ż = g(w, z; q) of the form
+    (:func:`bayes_mr.models.kernel._zdot`), f_r = c ẋ + m_k k x + f_s [+ m_s ε ż, lugre] + f0 + c_v u_e ẋ +
+    k3 x³ + the fluid forces; m_k = 1 + drift·t, m_s = m_k (1 + a_v u_e), a_z = 1 + asym·sgn z, u_e the
+    (saturated) filtered command of voltage_dependence, u̇ = ρ η (v − u) (ρ = r_d while the field falls).
+    The kinks (sgn w, sgn z, |w|) are differentiated on the side the state is on; d(sgn(z)|z|ⁿ)/dz = n|z|ⁿ⁻¹,
+    finite at z = 0 for n ≥ 1 (the forms' range); ``zn`` = |z|ⁿ (unused by dahl and lugre).
+    """
+    form = lay[L_FORM]
+    o = lay[L_PFORM]
+    i = lay[L_SFORM]
+    x, xd, v = a[0], a[1], a[2]
+    z = s[i]
+    m_k = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
+    ue, due, dus = 0.0, 0.0, 0.0
+    gain = 0.0
+    vdf = 1.0
+    if lay[L_VD] >= 0:
+        gain = p[lay[L_VD]]
+        ue, due, dus = _saturation(lay, p, s[lay[L_SU]])
+        vdf = 1.0 + gain * ue
+    m_s = m_k * vdf
+    sz = _sgn(z)
+    a_z = 1.0 + p[lay[L_ASYM]] * sz if lay[L_ASYM] >= 0 else 1.0
+    jc = o + 1 if form == BW else o + 2  # coef's index
+    coef = p[jc]
+    f_s = m_s * coef * z * a_z
+    inv_cs = 1.0 / p[lay[L_LVR]] if lay[L_LVR] >= 0 else 0.0
+    w = xd - f_s * inv_cs
+    aw = abs(w)
+    sw = _sgn(w)
+    az = abs(z)
+    if az > 0.0:
+        zn1 = zn / az  # |z|ⁿ⁻¹ without a second pow
+        lz = math.log(az)
+    else:
+        zn1 = 1.0 if (form == NBW or form == BW) and p[o + 4] == 1.0 else 0.0  # n at o + 4 in both
+        lz = 0.0
+    # ż = g(w, z; q): g_w = ∂g/∂w, g_z = ∂g/∂z at fixed w, and the columns of q written here
+    if form == NBW:
+        rho, n, sg = p[o + 3], p[o + 4], p[o + 5]
+        shape = w - sg * aw * sz * zn + (sg - 1.0) * w * zn
+        zd = rho * shape
+        g_w = rho * (1.0 - sg * sw * sz * zn + (sg - 1.0) * zn)
+        g_z = rho * n * zn1 * (-sg * aw + (sg - 1.0) * w * sz)
+        jp[i, o + 3] = shape
+        jp[i, o + 4] = rho * (-sg * aw * sz + (sg - 1.0) * w) * zn * lz
+        jp[i, o + 5] = rho * (w - aw * sz) * zn
+    elif form == DAHL:
+        sig = p[o + 3]
+        q = 1.0 - z * sw
+        zd = sig * w * q
+        g_w = sig * q
+        g_z = -sig * aw
+        jp[i, o + 3] = w * q
+    elif form == LUGRE:
+        alp = p[o + 4]
+        zd = w - alp * aw * z
+        g_w = 1.0 - alp * sw * z
+        g_z = -alp * aw
+        jp[i, o + 4] = -aw * z
+    else:
+        b1, gm, n = p[o + 2], p[o + 3], p[o + 4]
+        zd = w - b1 * aw * sz * zn - gm * w * zn
+        g_w = 1.0 - b1 * sw * sz * zn - gm * zn
+        g_z = -n * zn1 * (b1 * aw + gm * w * sz)
+        jp[i, o + 2] = -aw * sz * zn
+        jp[i, o + 3] = -w * zn
+        jp[i, o + 4] = -(b1 * aw * sz + gm * w) * zn * lz
+    eps_ms = 0.0
+    eps_zd = 0.0
+    if form == LUGRE:
+        eps = p[o + 3]
+        eps_ms = m_s * eps
+        eps_zd = eps * zd
+        fp[o + 3] = m_s * zd
+        fp[o + 4] = eps_ms * jp[i, o + 4]
+    # the state z: through g directly and through w
+    dzz = g_z - g_w * m_s * coef * a_z * inv_cs
+    js[i, i] = dzz
+    fs[i] = m_s * coef * a_z + eps_ms * dzz
+    # c, k and the hysteretic force's coefficient
+    fp[o] = xd
+    _via_force(jp, fp, i, jc, m_s * z * a_z, 0.0, g_w, inv_cs, eps_ms, eps_zd)
+    if form == BW:
+        fp[o + 1] += m_k * x  # bouc-wen's k is also the elastic stiffness
+    else:
+        fp[o + 1] = m_k * x
+    fz = coef * z * a_z  # ∂f_s/∂m_s
+    if lay[L_DRIFT] >= 0:
+        j = lay[L_DRIFT]
+        _via_force(jp, fp, i, j, t * vdf * fz, t * vdf, g_w, inv_cs, eps_ms, eps_zd)
+        fp[j] += t * p[o + 1] * x
+    if lay[L_ASYM] >= 0:
+        _via_force(jp, fp, i, lay[L_ASYM], m_s * coef * z * sz, 0.0, g_w, inv_cs, eps_ms, eps_zd)
+    if lay[L_VD] >= 0:
+        j = lay[L_VD]
+        iu = lay[L_SU]
+        us = s[iu]
+        eta = p[j + 2]
+        rho_d = p[lay[L_FDEC]] if lay[L_FDEC] >= 0 and abs(v) < abs(us) else 1.0
+        _via_force(jp, fp, i, j, m_k * ue * fz, m_k * ue, g_w, inv_cs, eps_ms, eps_zd)
+        fp[j + 1] = ue * xd
+        jp[iu, j + 2] = rho_d * (v - us)
+        js[iu, iu] = -rho_d * eta
+        # the state u, through u_e in m_s and in c_v u_e ẋ
+        dfs = m_k * gain * due * fz
+        d = -g_w * dfs * inv_cs
+        js[i, iu] = d
+        fs[iu] = dfs + eps_ms * d + m_k * gain * due * eps_zd + p[j + 1] * due * xd
+        if lay[L_CSAT] >= 0:
+            jq = lay[L_CSAT]
+            _via_force(jp, fp, i, jq, m_k * gain * dus * fz, m_k * gain * dus, g_w, inv_cs, eps_ms, eps_zd)
+            fp[jq] += p[j + 1] * dus * xd
+        if lay[L_FDEC] >= 0:
+            jp[iu, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
+    if lay[L_LVR] >= 0:
+        j = lay[L_LVR]
+        d = g_w * f_s * inv_cs * inv_cs  # ∂w/∂c_s = f_s/c_s²
+        jp[i, j] = d
+        fp[j] = eps_ms * d
+    if lay[L_F0] >= 0:
+        fp[lay[L_F0]] = 1.0
+    if lay[L_K3] >= 0:
+        fp[lay[L_K3]] = x * x * x
+    _fluid_partials(lay, cst, p, xd, fp)
+
+
+@hot(inline="always")
+def partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
+    """:func:`spencer_partials` or :func:`thesis_partials`, by the layout's form."""
+    if lay[L_FORM] == SPENCER:
+        spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn)
+    else:
+        thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn)
+
+
+@hot(inline="always")
+def _power(lay, p, s):
+    """|z|ⁿ of the form's power (:func:`~bayes_mr.models.kernel.power_slot`) at state ``s``; −1 for a form
+    without one (dahl, lugre), which :func:`~bayes_mr.models.kernel.deriv_pow` then ignores."""
+    iz, ip = power_slot(lay)
+    if iz < 0:
+        return -1.0
+    return math.pow(abs(s[iz]), p[ip])
+
+
+@hot(inline="always")
 def _stage(js, jp, T, K, ns, n_th):
     """K = J_s T + J_θ (ns, n_θ)."""
     for q in range(ns):
@@ -218,8 +382,6 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
     """
     ns = lay[L_NS]
     n_th = p.size
-    iz = lay[L_SFORM] + 1
-    ip = lay[L_PFORM] + 12
     inv_n = 1.0 / n_sub
     hs = h * inv_n
     hs6 = hs / 6.0
@@ -239,9 +401,9 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
                     tmp[q] = s[q] + c * hs * k[st - 1, q]
                 for jj in range(n_th):
                     T[q, jj] = S[q, jj] if st == 0 else S[q, jj] + c * hs * K[st - 1, q, jj]
-            zn = math.pow(abs(tmp[iz]), p[ip])
+            zn = _power(lay, p, tmp)
             deriv_pow(lay, cst, p, tj + c * hs, am, tmp, k[st], zn)
-            spencer_partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
+            partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
             _stage(js, jp, T, K[st], ns, n_th)
         for q in range(ns):
             s[q] += hs6 * (k[0, q] + 2.0 * k[1, q] + 2.0 * k[2, q] + k[3, q])
@@ -296,9 +458,9 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
     js, jp, fs, fp = np.zeros((ns, ns)), np.zeros((ns, n_th)), np.zeros(ns), np.zeros(n_th)
     for row in range(N):
         t = row * h
-        zn = math.pow(abs(s[lay[L_SFORM] + 1]), p[lay[L_PFORM] + 12])
+        zn = _power(lay, p, s)
         f_r, f_d = deriv_pow(lay, cst, p, t, inputs[row], s, k[0], zn)
-        spencer_partials(lay, cst, p, t, inputs[row], s, js, jp, fs, fp, zn)
+        partials(lay, cst, p, t, inputs[row], s, js, jp, fs, fp, zn)
         if row % every == 0:
             _write(out, dout, row // every, f_r, f_d, fs, fp, S, ns, n_th)
         if not math.isfinite(f_r):

@@ -21,17 +21,35 @@ from bayes_mr.simulation.simulate import delay, note
 #: Effects whose partial derivatives the sensitivity kernel has (besides the form's own), and the two applied
 #: to the kernel's force here, as :func:`~bayes_mr.simulation.simulate.simulate` applies them (``inertia``,
 #: ``sensor_delay``).
-COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "command_saturation", "field_decay",
-                             "cubic_stiffness", "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
+COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "voltage_dependence",
+                             "command_saturation", "field_decay", "low_velocity_rolloff", "cubic_stiffness",
+                             "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
 #: Forms, by kind of test, whose partial derivatives it has.
-COVERED_FORMS = {"device": frozenset({"spencer"})}
+COVERED_FORMS = {"device": frozenset({"spencer", "normalized-bouc-wen", "dahl", "lugre", "bouc-wen"})}
 
 
 def covered(model: Model | str, kind: str) -> bool:
-    """Whether ``model`` in a ``kind`` test has exact sensitivities (:data:`COVERED_FORMS`, :data:`COVERED_EFFECTS`)."""
+    """Whether ``model`` in a ``kind`` test has exact sensitivities (:data:`COVERED_FORMS`, :data:`COVERED_EFFECTS`).
+
+    A covered model's sensitivities differentiate RK4 steps only: whether one evaluation can have them depends
+    also on its schedule (:func:`replayable`).
+    """
     model = get_model(model)
     return (model.form.name in COVERED_FORMS.get(kind, ())
             and all(e.name in COVERED_EFFECTS for e in model.effects))
+
+
+def replayable(schedule: np.ndarray) -> bool:
+    """Whether a simulation's sub-step ``schedule`` took every interval by RK4 (all counts positive), so that
+    :func:`force_sensitivities` can differentiate it.
+
+    An interval taken by ROS2 (a negative count: a stiff interval of a thesis form in a device test,
+    :mod:`bayes_mr.models.integrate`) is not differentiated: its step depends on θ and s also through the
+    forward-difference Jacobian in its W, whose exact derivative the kernel does not have. A caller falls back
+    to finite differences for that evaluation (:class:`bayes_mr.inference.lsq.refine.Residuals`).
+    """
+    sched = np.asarray(schedule)
+    return sched.size > 0 and bool(np.all(sched >= 1))
 
 
 def force_sensitivities(model: Model | str, inputs: Inputs, theta: np.ndarray,
@@ -66,7 +84,7 @@ def force_sensitivities(model: Model | str, inputs: Inputs, theta: np.ndarray,
     theta = np.ascontiguousarray(theta, float)
     S, rows = inputs.upsample, inputs.grid_rows
     sched = np.ascontiguousarray(np.asarray(schedule, np.int64).ravel())
-    if sched.size != max(rows.shape[0] - 1, 1) or np.any(sched < 1):
+    if sched.size != max(rows.shape[0] - 1, 1) or not replayable(sched):
         raise ValueError(f"schedule of {sched.size} counts: this input's grid needs {rows.shape[0] - 1}, "
                          "all RK4 (positive)")
     N = inputs.n

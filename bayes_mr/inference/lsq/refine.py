@@ -112,7 +112,7 @@ class Residuals:
         phi = np.asarray(phi, float)
         if self.at is None or not np.array_equal(self.at, phi):
             self(phi)  # the schedule at φ itself
-        if np.any(self.schedule < 1):
+        if not sensitivity.replayable(self.schedule):
             return None
         lik = self.lik
         _, dforce, failed = sensitivity.force_sensitivities(lik.model, lik.inputs, lik.par.full(phi), self.schedule)
