@@ -1,9 +1,11 @@
 """Exact sensitivities (bayes_mr.models.sensitivity) against central differences on the same schedule.
 
-Every covered case (spencer in a device test, alone and with each covered effect and several together; the
+Every covered case (each form in a device test, alone and with each covered effect and several together; the
 command linear and held, and the drive band-limited) must give the simulator's own force bit for bit and each
 column of ∂f/∂θ within 1e-6 (relative, column norm) of central differences of the simulator on the replayed
 schedule; and least squares' Jacobian in φ built from them must agree with its finite-difference one likewise.
+The thesis forms' parameters are stiff enough that RK4 needs sub-steps, simulated without ROS2 (whose steps
+have no sensitivities: least squares takes finite differences there, tested below).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from records import device_inputs
 from bayes_mr.inference.lsq.refine import Residuals
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import get_model
-from bayes_mr.simulation.sensitivity import covered, force_sensitivities
+from bayes_mr.simulation.sensitivity import covered, force_sensitivities, replayable
 from bayes_mr.simulation.simulate import simulate, synthesize
 
 #: Relative agreement of a sensitivity column with central differences (the issue's criterion).
@@ -39,6 +41,35 @@ CASES = [
                                                                            "f0": 10.0}, "hold", "linear"),
 ]
 
+# the thesis forms at 8 mm with rates that need 2-18 RK4 sub-steps per 1-ms interval; bouc-wen at a device's
+# force scale (its defaults are Table 3.2's 0.2-kg oscillator), hardening (γ < 0) and softening
+DAHL = {"sigma": 2e4}
+LUGRE = {"alpha": 2e4}
+NBW = {"rho": 2e4, "n": 1.5}
+BW = {"c": 200.0, "k": 2e4, "beta1": 2e4, "gamma": 1e4, "n": 1.0}
+BW_HARD = {"c": 200.0, "k": 2e4, "beta1": 2e5, "gamma": -1e5, "n": 1.3}
+THESIS_CASES = [
+    ("dahl", DAHL, "linear", "linear"),
+    ("dahl", DAHL, "hold", "bandlimited"),
+    ("lugre", LUGRE, "linear", "linear"),
+    ("bouc-wen", BW, "linear", "linear"),
+    ("bouc-wen", BW_HARD, "linear", "linear"),
+    ("normalized-bouc-wen", NBW, "linear", "linear"),
+    ("dahl+low_velocity_rolloff", {**DAHL, "c_s": 500.0}, "linear", "linear"),
+    ("lugre+low_velocity_rolloff", {**LUGRE, "c_s": 800.0}, "linear", "linear"),
+    ("dahl+voltage_dependence+command_saturation+field_decay", {**DAHL, "u_s": 1.5, "r_d": 0.4}, "hold", "linear"),
+    ("lugre+stiffness_drift+asymmetry+force_offset", {**LUGRE, "drift": 0.2, "asym": 0.25, "f0": 10.0}, "linear",
+     "linear"),
+    ("lugre+voltage_dependence+low_velocity_rolloff+asymmetry", {**LUGRE, "c_s": 800.0, "asym": 0.2}, "linear",
+     "linear"),
+    ("normalized-bouc-wen+voltage_dependence+low_velocity_rolloff+stiffness_drift",
+     {**NBW, "c_s": 300.0, "drift": -0.1}, "linear", "linear"),
+    ("normalized-bouc-wen+asymmetry+force_offset+cubic_stiffness", {**NBW, "asym": 0.2, "f0": -20.0, "k3": 1e8},
+     "linear", "linear"),
+    ("bouc-wen+cubic_stiffness+shear_thinning+stribeck_friction", {**BW, "k3": 1e8}, "linear", "linear"),
+    ("dahl+inertia+sensor_delay", {**DAHL, "m_e": 2.0, "delay": 0.0023}, "linear", "linear"),
+]
+
 
 def _perturbed_theta(model, values, seed=0):
     """The published parameters (and ``values``) moved a few per cent, so no term sits at a special value."""
@@ -52,12 +83,12 @@ def _inputs(command_interp, interp, n=1200):
     return inp.with_command_interp(command_interp).with_interp(interp)
 
 
-@pytest.mark.parametrize("name, values, command_interp, interp", CASES)
+@pytest.mark.parametrize("name, values, command_interp, interp", CASES + THESIS_CASES)
 def test_sensitivities_match_central_differences(name, values, command_interp, interp):
     model = get_model(name)
     inputs = _inputs(command_interp, interp)
     theta = _perturbed_theta(model, values)
-    sim = simulate(model, inputs, theta)
+    sim = simulate(model, inputs, theta, ros2=False)  # RK4 throughout (spencer's schedule is the same either way)
     sched = sim.schedule[0]
     assert sched.max() > 1  # the stiff law needs sub-steps here: the schedule's replay is tested too
     force, dforce, failed = force_sensitivities(model, inputs, theta, sched)
@@ -87,7 +118,12 @@ def _record(name, values, seed=5):
                       {"displacement": x, "velocity": xd, "voltage": v}, noise=0.01, seed=seed)
 
 
-@pytest.mark.parametrize("name, values", [("spencer", {}), ("spencer+force_offset", {"f0": -40.0})])
+@pytest.mark.parametrize("name, values", [
+    ("spencer", {}), ("spencer+force_offset", {"f0": -40.0}),
+    # hardening (γ < 0, on the sign-free asinh coordinate) and not stiff, so the default simulation takes RK4
+    ("bouc-wen", {"c": 200.0, "k": 2e4, "beta1": 2e3, "gamma": -1e3, "n": 1.0}),
+    ("lugre+low_velocity_rolloff", {"c_s": 800.0}),
+])
 def test_least_squares_jacobian_is_exact(name, values):
     """Residuals' Jacobian in φ from the sensitivities agrees with its central differences, and is used."""
     lik = OutputError(name, _record(name, values))
@@ -97,6 +133,7 @@ def test_least_squares_jacobian_is_exact(name, values):
     exact = Residuals(lik, sd)
     assert exact.exact
     exact(phi)
+    assert replayable(exact.schedule)  # RK4 throughout: the sensitivities, not the fallback
     J = exact.jacobian(phi)
     fd = Residuals(lik, sd, exact=False)
     fd(phi)
@@ -107,14 +144,63 @@ def test_least_squares_jacobian_is_exact(name, values):
 
 def test_models_without_sensitivities_keep_finite_differences():
     """A form or effect the kernel has no partials of is not covered: its Jacobian stays finite differences."""
-    assert covered("spencer", "device") and covered("spencer+force_offset", "device")
-    for name, kind in (("dahl", "device"), ("spencer+field_dynamics", "device"), ("spencer", "structure"),
-                       ("spencer+small_amplitude_regime", "device"), ("spencer+term(xdot*abs(x))", "device")):
-        assert not covered(name, kind)
-    lik = OutputError("dahl+force_offset", _record("dahl+force_offset", {"f0": 5.0}))
+    for name in ("spencer", "spencer+force_offset", "dahl", "lugre+voltage_dependence+field_decay",
+                 "bouc-wen+low_velocity_rolloff", "normalized-bouc-wen+sensor_delay"):
+        assert covered(name, "device"), name
+    for name, kind in (("dahl", "structure"), ("spencer+field_dynamics", "device"), ("spencer", "structure"),
+                       ("spencer+small_amplitude_regime", "device"), ("spencer+term(xdot*abs(x))", "device"),
+                       ("dahl+small_amplitude_regime", "device"),
+                       ("lugre+voltage_dependence+command_polynomial", "device")):
+        assert not covered(name, kind), name
+    lik = OutputError("dahl+small_amplitude_regime", _record("dahl+small_amplitude_regime", {}))
     assert not Residuals(lik, lik.noise_sd).exact
     with pytest.raises(ValueError, match="no exact sensitivities"):
-        force_sensitivities("dahl", device_inputs(0.008), get_model("dahl").theta("device", {}), np.ones(1499, int))
+        force_sensitivities("dahl+small_amplitude_regime", device_inputs(0.008),
+                            get_model("dahl+small_amplitude_regime").theta("device", {}), np.ones(1499, int))
+
+
+def test_ros2_intervals_fall_back_to_finite_differences():
+    """A covered model whose evaluation took a stiff interval by ROS2 has no sensitivities there: the exact
+    Residuals' Jacobian at that point is the finite-difference one, number for number, and no sensitivity run
+    is made; the sensitivity kernel refuses such a schedule."""
+    from bayes_mr.simulation.simulate import tally
+
+    lik = OutputError("dahl", _record("dahl", DAHL))
+    coords = lik.par.coords
+    phi = coords.to_phi(np.clip(_perturbed_theta(lik.model, DAHL, 9)[lik.par.free_idx], coords.lower, coords.upper))
+    sd = lik.noise_sd
+    exact = Residuals(lik, sd)
+    assert exact.exact  # dahl is covered ...
+    with tally() as calls:
+        exact(phi)
+        J = exact.jacobian(phi)
+    assert not replayable(exact.schedule)  # ... but this evaluation took ROS2 intervals
+    assert not any(c["sensitivities"] for c in calls)
+    fd = Residuals(lik, sd, exact=False)
+    fd(phi)
+    np.testing.assert_array_equal(J, fd.jacobian(phi))
+    with pytest.raises(ValueError, match="all RK4"):
+        force_sensitivities(lik.model, lik.inputs, lik.par.full(phi), exact.schedule)
+
+
+def test_exact_and_finite_difference_least_squares_reach_the_same_optimum():
+    """Least squares on a dahl device test (RK4 throughout, so every Jacobian is exact) ends where the finite-
+    difference refinement does: the same −ln L to 8 digits, from the same start."""
+    from bayes_mr.inference.lsq.refine import refine
+    from bayes_mr.simulation.simulate import tally
+
+    lik = OutputError("dahl", _record("dahl", {}))
+    coords = lik.par.coords
+    phi0 = coords.to_phi(np.clip(_perturbed_theta(lik.model, {}, 11)[lik.par.free_idx] * 1.3, coords.lower,
+                                 coords.upper))
+    sd = lik.noise_sd
+    with tally() as calls:
+        a = refine(lik, phi0, sd, max_nfev=60, exact=True)
+    assert sum(c["sensitivities"] for c in calls) >= 3  # the exact path was taken at every step
+    b = refine(lik, phi0, sd, max_nfev=60, exact=False)
+    assert a.status > 0 and b.status > 0
+    assert abs(a.cost - b.cost) <= 1e-8 * b.cost, (a.cost, b.cost)
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-4)
 
 
 def test_tally_counts_runs_and_their_sub_steps():
