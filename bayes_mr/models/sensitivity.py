@@ -43,9 +43,10 @@ import numpy as np
 
 from bayes_mr._compile.jit import driver, hot
 from bayes_mr.models import kernel
+from bayes_mr.models.drivers import _write_out
 from bayes_mr.models.kernel import (
-    BW, DAHL, K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_FORM, L_K3, L_LVR, L_NS, L_PFORM, L_SF, L_SFORM,
-    L_ST, L_SU, L_VD, LUGRE, NBW, SPENCER, power_slot,
+    BW, DAHL, DEVICE, FORCED, K_IMASS, K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_FORM, L_K3, L_KIND, L_LVR,
+    L_MASS, L_NS, L_PFORM, L_PFRAME, L_SF, L_SFORM, L_ST, L_SU, L_VD, LUGRE, NBW, SPENCER, power_slot,
 )
 
 #: :func:`bayes_mr.models.kernel.deriv_pow` inlined into this module's loops at numba-IR level, as the simulator's
@@ -106,6 +107,24 @@ def _fluid_partials(lay, cst, p, xd, fp):
 
 
 @hot(inline="always")
+def _fluid_slope(lay, cst, p, xd):
+    """∂/∂ẋ of the velocity-only forces (kernel._fluid_friction) [N·s/m]: a structure or forced test's ẋ is a
+    state."""
+    g = 0.0
+    if lay[L_ST] >= 0:
+        j = lay[L_ST]
+        g += p[j] * math.pow(1.0 + abs(xd) / p[j + 2], p[j + 1] - 1.0)
+    if lay[L_SF] >= 0:
+        j = lay[L_SF]
+        r = xd / p[j + 1]
+        rr = r * r
+        if rr < 700.0:
+            th = math.tanh(r / cst[K_SMOOTH])
+            g += p[j] * math.exp(-rr) * (-2.0 * r * th + (1.0 - th * th) / cst[K_SMOOTH]) / p[j + 1]
+    return g
+
+
+@hot(inline="always")
 def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d, g_r,
                      c1, c1b, yd, jp, fp, i):
     """The effects' columns (:data:`bayes_mr.simulation.sensitivity.COVERED_EFFECTS` of the kernel's):
@@ -147,7 +166,11 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     """
     o = lay[L_PFORM]
     i = lay[L_SFORM]
-    x, xd, v = a[0], a[1], a[2]
+    if lay[L_KIND] == DEVICE:
+        x, xd = a[0], a[1]
+    else:
+        x, xd = s[0], s[1]
+    v = a[2]
     y, z, us = s[i], s[i + 1], s[i + 2]
     ab, c0b, k0, c1b = p[o + 1], p[o + 3], p[o + 4], p[o + 6]
     gam, bet, A, n, eta = p[o + 9], p[o + 10], p[o + 11], p[o + 12], p[o + 13]
@@ -197,6 +220,19 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     jp[i + 2, o + 13] = rho * (v - us)
     _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, p[o + 7] * x - p[o + 8], bracket,
                      inv_d, g_r, c1, c1b, yd, jp, fp, i)
+    if lay[L_KIND] != DEVICE:
+        # x and ẋ are states 0 and 1: ẏ = (… + c0 ẋ + k0 (x − y))/(c0 + c1), and the frame's c ẋ + m_k k x
+        jf = lay[L_PFRAME]
+        js[i, 0], js[i, 1] = k0 * inv_d, c0 * inv_d
+        js[i + 1, 0], js[i + 1, 1] = -g_r * k0 * inv_d, g_r * (1.0 - c0 * inv_d)
+        fs[0] = c1 * k0 * inv_d + m_s * (p[o + 7] + p[jf + 1])
+        fs[1] = c1 * c0 * inv_d + p[jf] + _fluid_slope(lay, cst, p, xd)
+        if lay[L_K3] >= 0:
+            fs[0] += 3.0 * p[lay[L_K3]] * x * x
+        fp[jf] = xd
+        fp[jf + 1] = m_s * x
+        if lay[L_DRIFT] >= 0:
+            fp[lay[L_DRIFT]] += t * p[jf + 1] * x
 
 
 @hot(inline="always")
@@ -226,7 +262,11 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     form = lay[L_FORM]
     o = lay[L_PFORM]
     i = lay[L_SFORM]
-    x, xd, v = a[0], a[1], a[2]
+    if lay[L_KIND] == DEVICE:
+        x, xd = a[0], a[1]
+    else:
+        x, xd = s[0], s[1]
+    v = a[2]
     z = s[i]
     m_k = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
     ue, due, dus = 0.0, 0.0, 0.0
@@ -341,15 +381,36 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     if lay[L_K3] >= 0:
         fp[lay[L_K3]] = x * x * x
     _fluid_partials(lay, cst, p, xd, fp)
+    if lay[L_KIND] != DEVICE:
+        # x and ẋ are states 0 and 1: ż sees ẋ through w, f_r sees both
+        js[i, 1] = g_w
+        fs[0] = m_k * p[o + 1]
+        fs[1] = p[o] + eps_ms * g_w + _fluid_slope(lay, cst, p, xd)
+        if lay[L_VD] >= 0:
+            fs[1] += p[lay[L_VD] + 1] * ue
+        if lay[L_K3] >= 0:
+            fs[0] += 3.0 * p[lay[L_K3]] * x * x
 
 
 @hot(inline="always")
-def partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
-    """:func:`spencer_partials` or :func:`thesis_partials`, by the layout's form."""
+def partials(lay, cst, p, t, a, s, ds, js, jp, fs, fp, zn):
+    """:func:`spencer_partials` or :func:`thesis_partials`, by the layout's form, and in a structure or forced
+    test the rows of x and ẋ: ẋ' = ẋ, ẍ = −ẍ_g − f_r/m (structure) or (p − f_r)/m (forced, m a parameter).
+    ``ds`` holds the rates at ``s`` (:func:`~bayes_mr.models.kernel.deriv_pow`'s), the forced test's ẍ there."""
     if lay[L_FORM] == SPENCER:
         spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn)
     else:
         thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn)
+    if lay[L_KIND] != DEVICE:
+        ns = lay[L_NS]
+        im = 1.0 / p[lay[L_MASS]] if lay[L_KIND] == FORCED else cst[K_IMASS]
+        js[0, 1] = 1.0
+        for q in range(ns):
+            js[1, q] = -fs[q] * im
+        for j in range(p.size):
+            jp[1, j] = -fp[j] * im
+        if lay[L_KIND] == FORCED:
+            jp[1, lay[L_MASS]] = -ds[1] * im  # ∂/∂m of (p − f_r)/m
 
 
 @hot(inline="always")
@@ -403,7 +464,7 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
                     T[q, jj] = S[q, jj] if st == 0 else S[q, jj] + c * hs * K[st - 1, q, jj]
             zn = _power(lay, p, tmp)
             deriv_pow(lay, cst, p, tj + c * hs, am, tmp, k[st], zn)
-            partials(lay, cst, p, tj + c * hs, am, tmp, js, jp, fs, fp, zn)
+            partials(lay, cst, p, tj + c * hs, am, tmp, k[st], js, jp, fs, fp, zn)
             _stage(js, jp, T, K[st], ns, n_th)
         for q in range(ns):
             s[q] += hs6 * (k[0, q] + 2.0 * k[1, q] + 2.0 * k[2, q] + k[3, q])
@@ -412,15 +473,28 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, s, S, k, K, T, tmp, am, js, jp, 
 
 
 @hot(inline="always")
-def _write(out, dout, o, f_r, f_d, fs, fp, S, ns, n_th):
-    """Sample ``o``'s forces and ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s."""
-    out[o, 0] = f_r
-    out[o, 1] = f_d
+def _write(lay, cst, p, a, s, out, dout, o, f_r, f_d, fs, fp, S, ns, n_th):
+    """Sample ``o``'s outputs (as :func:`~bayes_mr.models.drivers.run_one` writes them) and their derivatives:
+    a device test's ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s; a structure or forced test's ∂x/∂θ, ∂ẋ/∂θ (rows of
+    S) and the absolute acceleration's, −(∂f_r/∂θ)/m (a forced test's ∂/∂m also −ẍ/m)."""
+    _write_out(lay, cst, p, a, s, f_r, f_d, out[o])
+    if lay[L_KIND] == DEVICE:
+        for j in range(n_th):
+            acc = fp[j]
+            for q in range(ns):
+                acc += fs[q] * S[q, j]
+            dout[o, 0, j] = acc
+        return
+    im = 1.0 / p[lay[L_MASS]] if lay[L_KIND] == FORCED else cst[K_IMASS]
     for j in range(n_th):
         acc = fp[j]
         for q in range(ns):
             acc += fs[q] * S[q, j]
-        dout[o, j] = acc
+        dout[o, 0, j] = S[0, j]
+        dout[o, 1, j] = S[1, j]
+        dout[o, 2, j] = -acc * im
+    if lay[L_KIND] == FORCED:
+        dout[o, 2, lay[L_MASS]] -= out[o, 2] * im
 
 
 @driver(nogil=True)  # nogil: fits side by side on threads (executor.local_threads)
@@ -436,10 +510,13 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
         Simulation step [s] (the sample interval over the input's upsampling).
     inputs : ndarray, shape (N, 3)
         Input rows as for :func:`~bayes_mr.models.drivers.run_one`.
-    out : ndarray, shape ((N-1)//every + 1, 2)
-        Device test's force f_r and damper force f_d [N] at every ``every``-th row.
-    dout : ndarray, shape ((N-1)//every + 1, n_θ)
-        ∂f_r/∂θ [N per parameter unit] at the same rows.
+    out : ndarray, shape ((N-1)//every + 1, n_out)
+        The outputs of :func:`~bayes_mr.models.drivers.run_one` at every ``every``-th row: a device test's
+        force f_r and damper force f_d [N]; a structure or forced test's x [m], ẋ [m/s], absolute
+        acceleration [m/s²] and damper force [N].
+    dout : ndarray, shape ((N-1)//every + 1, C, n_θ)
+        Derivatives at the same rows [output unit per parameter unit]: C = 1, ∂f_r/∂θ (device); C = 3, the
+        derivatives of x, ẋ and the acceleration (structure, forced; not of the damper force).
     schedule : int64 ndarray, shape (N-1,)
         RK4 sub-steps of each interval, replayed (a base simulation's; all positive: RK4).
     every, hold : as for :func:`~bayes_mr.models.drivers.run_one`.
@@ -460,9 +537,9 @@ def run_sensitivities(lay, cst, p, h, inputs, out, dout, schedule, every=1, hold
         t = row * h
         zn = _power(lay, p, s)
         f_r, f_d = deriv_pow(lay, cst, p, t, inputs[row], s, k[0], zn)
-        partials(lay, cst, p, t, inputs[row], s, js, jp, fs, fp, zn)
+        partials(lay, cst, p, t, inputs[row], s, k[0], js, jp, fs, fp, zn)
         if row % every == 0:
-            _write(out, dout, row // every, f_r, f_d, fs, fp, S, ns, n_th)
+            _write(lay, cst, p, inputs[row], s, out, dout, row // every, f_r, f_d, fs, fp, S, ns, n_th)
         if not math.isfinite(f_r):
             out[(row + every - 1) // every:] = np.nan
             dout[(row + every - 1) // every:] = np.nan
