@@ -1,4 +1,4 @@
-"""Forward sensitivities of a simulation: the force and its derivatives ∂f_r/∂θ in one compiled pass.
+"""Forward sensitivities of a simulation: its outputs and their derivatives ∂y/∂θ in one compiled pass.
 
 A least-squares step needs the Jacobian of the simulated outputs with respect to the parameters. Finite
 differences cost p + 1 simulations (14 for ``spencer``); integrating the sensitivities S = ∂s/∂θ beside the
@@ -11,28 +11,42 @@ differences replay it), the stage sensitivities are
 with J_s = ∂ṡ/∂s and J_θ = ∂ṡ/∂θ at each stage's state: for an explicit Runge–Kutta method with fixed steps,
 discretising the variational equations and differentiating the discretisation give the same numbers (Hairer,
 Nørsett & Wanner, *Solving ODEs I*, §I.14), so S is the derivative of what the simulator computes, to
-rounding, and the output's is ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s. The states themselves are advanced by the
-same operations as :func:`bayes_mr.models.integrate.advance` (same numbers, bit for bit).
+rounding. A device test's output is the force, ∂f_r/∂θ = (∂f_r/∂s) S + ∂f_r/∂θ|_s; a structure or forced
+test's are x and ẋ (rows of S) and the absolute acceleration −f_r/m or (p − f_r)/m. The states themselves are
+advanced by the same operations as :func:`bayes_mr.models.integrate.advance` (same numbers, bit for bit).
 
-Cost, in CPU time on one thread (a 4 s random device test at 1 kHz, published parameters, 18.7 RK4 sub-steps
-per interval): a run with spencer's 14 sensitivities takes 3.4 simulations of the generic kernel, against 13
-for a forward-difference Jacobian (one per free parameter; the base is the step's own residual). Per stage,
-about a third is the rates, a third the partials, a third the products J_s T (ns × ns × n_θ). What brought it
-there: the power |z|ⁿ computed once per stage and shared by the rates and the partials, the coefficients'
-columns written out instead of a loop with a branch per coefficient, and the rates and partials inlined
-(:data:`deriv_pow`). The run is one thread where the finite differences' batch runs on all cores, so on an
-idle two-core machine a single refinement's Jacobian gains less than its CPU time says; fits side by side
-(a search's starts, diagnose's candidates) and a busy machine gain all of it.
+ROS2. A device test's stiff intervals of the four thesis forms may be taken by the Rosenbrock step of
+:mod:`bayes_mr.models.integrate` (a negative count in the schedule). That step depends on θ and s also through
+its W = I − γhJ, J a forward-difference Jacobian, whose exact derivative would need the difference quotient's
+own derivative in θ and s; it is not implemented. The rule instead: a schedule is differentiated only when it
+took every interval by RK4 (:func:`bayes_mr.simulation.sensitivity.replayable`, always so in structure and
+forced tests and in device tests without stiff intervals), and least squares takes finite differences for an
+evaluation whose schedule holds a ROS2 interval (:class:`bayes_mr.inference.lsq.refine.Residuals`).
 
-Covered: the ``spencer`` form in a device test, with any of the effects whose partials
-:func:`spencer_partials` has (``force_offset``, ``stiffness_drift``, ``asymmetry``, ``command_saturation``,
-``field_decay``, ``cubic_stiffness``, ``shear_thinning``, ``stribeck_friction``; ``inertia`` and
-``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`).
-:func:`bayes_mr.simulation.sensitivity.covered` says which models; the others (the effects with discrete
-updates between sub-steps, ``field_dynamics`` and ``small_amplitude_regime``, the library terms, the other
-forms) keep finite differences.
-Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``) the derivative is that of the side the state is on, which
-is what a finite difference of a step that does not cross it sees.
+Cost, in CPU time on one thread (the generic kernel for both; best of 7 × 10 runs on a shared two-core
+machine at load 3.5-3.9). A dahl device test of 20 s at 1 kHz, 8 mm of five-sine motion, the thesis's
+parameters (one RK4 sub-step per interval): a run with the sensitivities of p = 4, 5, 6 parameters (``dahl``,
+``+force_offset``, ``+force_offset+asymmetry``) took 2.5, 2.4 and 2.9 simulations (7.0-9.6 ms against
+2.5-3.6 ms), against p for a forward-difference Jacobian (the base is the step's own residual). Spencer (4 s
+at 1 kHz, published parameters, 5.5 sub-steps per interval, 14 sensitivities): 2.9-3.1 simulations, against 13.
+Per stage, about a third is the rates, a third the partials, a third the products J_s T
+(ns × ns × n_θ). What brought it there: the power |z|ⁿ computed once per stage and shared by the rates and the
+partials, the coefficients' columns written out instead of a loop with a branch per coefficient, and the
+rates and partials inlined (:data:`deriv_pow`). The run is one thread where the finite differences' batch
+runs on all cores, so on an idle two-core machine a single refinement's Jacobian gains less than its CPU time
+says; fits side by side (a search's starts, diagnose's candidates) and a busy machine gain all of it.
+
+Covered (:func:`bayes_mr.simulation.sensitivity.covered`): every form (:func:`spencer_partials`,
+:func:`thesis_partials`) in a device, structure or forced test, with any of the effects whose partials they
+have: ``force_offset``, ``stiffness_drift``, ``asymmetry``, ``voltage_dependence`` (thesis forms),
+``command_saturation``, ``field_decay``, ``low_velocity_rolloff`` (thesis forms), ``cubic_stiffness``,
+``shear_thinning``, ``stribeck_friction``; ``inertia`` and ``sensor_delay`` act on the output and are applied
+by :mod:`bayes_mr.simulation.sensitivity`. The others keep finite differences: the effects with discrete
+updates between sub-steps (``field_dynamics``, ``small_amplitude_regime``), the other command laws
+(``command_polynomial``, ``exponential_saturation``) and the library terms. A structure or forced test's
+damper-force output has no derivatives here.
+Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``, ``sgn w``) the derivative is that of the side the state is
+on, which is what a finite difference of a step that does not cross it sees.
 """
 
 from __future__ import annotations

@@ -1,10 +1,13 @@
-"""A simulation with the exact derivatives of its output: one augmented run instead of p + 1.
+"""A simulation with the exact derivatives of its outputs: one augmented run instead of p + 1.
 
-:func:`force_sensitivities` runs :func:`bayes_mr.models.sensitivity.run_sensitivities` (RK4 with the forward
+:func:`output_sensitivities` runs :func:`bayes_mr.models.sensitivity.run_sensitivities` (RK4 with the forward
 sensitivity equations, differentiated step by step) on a replayed sub-step schedule, so its derivatives are
 those of the simulation a finite difference on that schedule would difference, without its truncation and
-rounding error. :func:`covered` says which models have it; least squares falls back to finite differences
-for the others (:class:`bayes_mr.inference.lsq.refine.Residuals`).
+rounding error: a device test's force, a structure or forced test's displacement, velocity and absolute
+acceleration (:data:`CHANNELS`); :func:`force_sensitivities` is the device test's one channel. :func:`covered`
+says which models have them, :func:`replayable` which schedules (RK4 throughout: a ROS2 interval's step is not
+differentiated, :mod:`bayes_mr.models.sensitivity`); least squares falls back to finite differences for the
+others (:class:`bayes_mr.inference.lsq.refine.Residuals`).
 """
 
 from __future__ import annotations
