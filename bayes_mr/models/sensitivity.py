@@ -166,7 +166,9 @@ def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s,
 
 @hot(inline="always")
 def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
-    """Partial derivatives of spencer's device-test rates and force at time ``t``, inputs ``a`` and state ``s``.
+    """Partial derivatives of spencer's rates and force at time ``t``, inputs ``a`` and state ``s``: in a device
+    test x and ẋ are inputs; in a structure or forced test states 0 and 1, and the frame's c ẋ + m_k k x adds
+    to the force (the rows of x and ẋ are :func:`partials`').
 
     Writes J_s = ∂ṡ/∂s into ``js`` (ns, ns), J_θ = ∂ṡ/∂θ into ``jp`` (ns, n_θ), ∂f_r/∂s into ``fs`` (ns)
     and ∂f_r/∂θ into ``fp`` (n_θ); only the entries that can be nonzero (the caller zeroes the arrays once).
@@ -262,8 +264,9 @@ def _via_force(jp, fp, i, j, dfs, dms, g_w, inv_cs, eps_ms, eps_zd):
 
 @hot(inline="always")
 def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
-    """Partial derivatives of a thesis form's device-test rates and force (normalized-bouc-wen, dahl, lugre,
-    bouc-wen), as :func:`spencer_partials` writes spencer's.
+    """Partial derivatives of a thesis form's rates and force (normalized-bouc-wen, dahl, lugre, bouc-wen), as
+    :func:`spencer_partials` writes spencer's; x and ẋ are the inputs of a device test, else states 0 and 1
+    (their rows are :func:`partials`').
 
     The law (:func:`bayes_mr.models.kernel.deriv`): f_s = m_s coef z a_z (coef = k_z, F_d, β or, for
     bouc-wen, k), w = ẋ − f_s/c_s (ẋ without low_velocity_rolloff), ż = g(w, z; q) of the form
