@@ -92,10 +92,12 @@ def test_sensitivities_match_central_differences(name, values, command_interp, i
     theta = _perturbed_theta(model, values)
     sim = simulate(model, inputs, theta, ros2=False)  # RK4 throughout (spencer's schedule is the same either way)
     sched = sim.schedule[0]
-    # the stiff law needs sub-steps here, and z is held on its loading branches in part of the intervals: the
-    # replay of both is tested too
+    # the stiff law needs sub-steps here or holds its state on a loading branch (not with low_velocity_rolloff):
+    # the schedule's replay is tested too
     held = sched >= BRANCH_CODE
-    assert 0.1 < held.mean() < 0.9 and steps(sched[~held]).max() > 1
+    assert steps(sched[~held]).max() > 1 or held.any()
+    if "low_velocity_rolloff" not in name:
+        assert held.any()
     force, dforce, failed = force_sensitivities(model, inputs, theta, sched)
     assert failed == -1
     np.testing.assert_array_equal(force, sim["force"])  # the same operations as the simulator
@@ -291,9 +293,11 @@ def test_ros2_intervals_fall_back_to_finite_differences():
     is made; the sensitivity kernel refuses such a schedule."""
     from bayes_mr.simulation.simulate import tally
 
-    lik = OutputError("dahl", _record("dahl", DAHL))
+    # low_velocity_rolloff: the state is not held on its branches (kernel.on_branch), where ROS2 takes them
+    name, values = "dahl+low_velocity_rolloff", {**DAHL, "c_s": 5e4}
+    lik = OutputError(name, _record(name, values))
     coords = lik.par.coords
-    phi = coords.to_phi(np.clip(_perturbed_theta(lik.model, DAHL, 9)[lik.par.free_idx], coords.lower, coords.upper))
+    phi = coords.to_phi(np.clip(_perturbed_theta(lik.model, values, 9)[lik.par.free_idx], coords.lower, coords.upper))
     sd = lik.noise_sd
     exact = Residuals(lik, sd)
     assert exact.exact  # dahl is covered ...
