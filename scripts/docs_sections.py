@@ -69,7 +69,7 @@ STUDIES = {
         "force noise, the current held between samples), writes it as CSVs and a manifest, reads it back with "
         "`load_records`, fits the true model jointly over every test and counts how often its 90 % intervals "
         "hold the truth, diagnoses its tests at one frequency (every amplitude and current) from plain "
-        "`{baseline}` and predicts each test by the true model fitted without its condition "
+        "`{baseline}` and predicts each test by the true model fitted from scratch without its condition "
         "(`studies/damper_matrix.py`). The matrix of its first noise realisation ships with the package as "
         "`load_packaged(\"damper-matrix-sim\")`."),
 }

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from bayes_mr.data.records import RecordSet
 from bayes_mr.inference.estimators import Emcee, engine
 from bayes_mr.inference.identify import Identify, after_warmup, by_condition, validated
+from bayes_mr.inference.lsq.least_squares import LSQSettings
 from bayes_mr.scores.conditions import condition_of
 from bayes_mr.scores.pooled import pooled
 
@@ -59,7 +60,7 @@ def _same(a: dict, b: dict, tolerance: float) -> bool:
 
 def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str = "iid", warmup: float = 0.0,
                   fixed: dict[str, float] | None = None, ranges: dict[str, tuple[float, float]] | None = None,
-                  progress: Callable[[str], None] | None = None) -> dict:
+                  progress: Callable[[str], None] | None = None, settings: LSQSettings | None = None) -> dict:
     """Fit ``model`` on the records of all conditions but one and predict that one's, for each condition.
 
     Parameters
@@ -80,6 +81,9 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
         ``bayes-mr fit --fix`` and ``--prior`` give them.
     progress : callable, optional
         Called with one line per fold.
+    settings : LSQSettings, optional
+        Least-squares settings of every fold's fit, from scratch (default: the package's, candidates seeded by
+        ``seed``, as ``bayes-mr fit --engine lsq``); a smaller search for a smoke test.
 
     Returns
     -------
@@ -116,7 +120,7 @@ def leave_one_out(records: RecordSet, model: str, *, seed: int = 0, noise: str =
         keep = [j for j in range(n) if folds[j] != fold]
         train = RecordSet(tuple(records[j] for j in keep), tuple(records.conditions[j] for j in keep),
                           ("train",) * len(keep), records.source, records.units, records.record_offsets)
-        job = Identify(model, engine("lsq", settings=Emcee.lsq_settings(seed)), ranges=ranges or {},
+        job = Identify(model, engine("lsq", settings=settings or Emcee.lsq_settings(seed)), ranges=ranges or {},
                        fixed=fixed or {}, noise=noise)
         idata = job.fit(train, seed=seed, progress=False)
         for i in (i for i in range(n) if folds[i] == fold):
