@@ -48,7 +48,7 @@ def test_stiff_device_tests_keep_the_accuracy_of_rk4(name, values):
     inputs = device_inputs(0.006, fs=1000.0)
     theta = model.theta("device", values)
     ref = reference_simulation(model, "device", theta, inputs)
-    # the states integrated on their loading branches too, where the default holds them (kernel.on_branch)
+    # the states integrated on their loading branches too, where the default holds them (branch.on_branch)
     adaptive = simulate(model, inputs, theta, hold_branch=False)
     rk4 = simulate(model, inputs, theta, ros2=False, hold_branch=False)
     stiff = np.abs(rk4.schedule) > 2
@@ -144,7 +144,7 @@ HELD = [("spencer", {})] + STIFF_DEVICE[:4]
 @pytest.mark.parametrize("name,values", HELD, ids=[c[0] for c in HELD])
 def test_a_saturated_loading_branch_is_held_at_the_same_accuracy(name, values, kind):
     """A hysteretic state at its saturation on a loading branch stays there however fast the piston moves
-    (kernel.on_branch), so an interval there holds it and integrates the other states at their own pace. Against
+    (branch.on_branch), so an interval there holds it and integrates the other states at their own pace. Against
     a fine reference the error is that of integrating the state everywhere (measured: equal to three digits),
     in far fewer sub-steps where RK4 took those intervals (structure tests: 0.06× for spencer, 0.12–0.2× for
     the thesis forms; spencer's device test 0.23×); where ROS2 took them (the thesis forms' device tests) in

@@ -16,7 +16,8 @@ from numba import prange
 
 from bayes_mr._compile.jit import driver, hot
 from bayes_mr.models.integrate import BRANCH, BRANCH_CODE, DECIDE, RK4, ROS2, advance, substeps, work_shape
-from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, on_branch, rate
+from bayes_mr.models.branch import on_branch
+from bayes_mr.models.kernel import DEVICE, L_KIND, L_NS, acceleration, deriv, rate
 
 
 @hot(inline="always")
@@ -51,7 +52,7 @@ def _integrate(lay, cst, p, h, inputs, out, schedule, use_schedule, s, k1, work,
     """Every interval of a record (:func:`run_one`); ``s0``, ``k0`` keep an interval's start for a retry.
 
     Where the hysteretic state starts an interval on a loading branch at saturation
-    (:func:`~bayes_mr.models.kernel.on_branch`), the interval is taken with that state held there and the
+    (:func:`~bayes_mr.models.branch.on_branch`), the interval is taken with that state held there and the
     sub-steps the other states' rates need, and kept if the state ends it on the branch too; else (a reversal
     inside the interval) it is taken again from its start as any other. The schedule records it
     (:data:`~bayes_mr.models.integrate.BRANCH_CODE` plus its sub-steps), so a replay takes the same steps.

@@ -43,7 +43,7 @@ and cut the cost of the packaged damper's least-squares optima 2.5–5×. ``spen
 
 ``spencer``'s own stiff intervals are cheaper another way: where its z sits at saturation on a loading branch, a
 fixed point of the law at any velocity, the driver (:func:`bayes_mr.models.drivers._integrate`) holds z there
-(:data:`BRANCH` mode; :func:`bayes_mr.models.kernel.on_branch`) and integrates the other states at their own pace
+(:data:`BRANCH` mode; :func:`bayes_mr.models.branch.on_branch`) and integrates the other states at their own pace
 (a quarter of the sub-steps of the bench's spencer tests at the same error against a fine reference).
 
 Each integrator evaluates the right-hand side from one call site, and ROS2 is a function of its own
@@ -60,9 +60,9 @@ import math
 import numpy as np
 
 from bayes_mr._compile.jit import hot
+from bayes_mr.models.branch import branch_state, saturation
 from bayes_mr.models.kernel import (
-    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, branch_state, coil_step, deriv,
-    deriv_pow, saturation,
+    DEVICE, K_CACC, K_NMAX, K_RTOL, K_STIFF, K_TENV, L_FD, L_KIND, L_NS, L_SA, L_SE, coil_step, deriv, deriv_pow,
 )
 from bayes_mr.models.power import point_powers
 
@@ -163,7 +163,7 @@ ROS2_ABOVE = 2
 ROS2_RTOL = 1e-3
 
 #: ``mode`` of :func:`advance`: choose by the error test, RK4, or ROS2 (the last two replay a schedule), or RK4 with
-#: the hysteretic state held on its loading branch (:func:`~bayes_mr.models.kernel.on_branch`).
+#: the hysteretic state held on its loading branch (:func:`~bayes_mr.models.branch.on_branch`).
 DECIDE, RK4, ROS2, BRANCH = 0, 1, 2, 3
 #: A schedule's entry for an interval taken in ``BRANCH`` mode: this plus its RK4 sub-steps (above any sub-step cap).
 BRANCH_CODE = 1 << 20
@@ -332,7 +332,7 @@ def advance(lay, cst, p, t, h, a0, a1, s, k1, n_sub, mode, work):
     with ROS2, ``n_sub`` is its number of steps); :data:`BRANCH` is RK4 with
     the hysteretic state's rate held at 0 and the state set to its saturation
     at the end (an interval on a loading branch, where that is the law's own
-    solution: :func:`~bayes_mr.models.kernel.on_branch`). Returns the number of ROS2
+    solution: :func:`~bayes_mr.models.branch.on_branch`). Returns the number of ROS2
     steps the interval took, 0 for RK4. RK4's four stages run in one loop
     with one call of :func:`deriv`, so a compiler that inlines it does so
     once, not four times.

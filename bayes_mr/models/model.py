@@ -419,7 +419,7 @@ class Model:
         """The float64 constants array the kernel reads (mass, envelope time, step control).
 
         ``ros2`` False integrates every interval with RK4 (:mod:`bayes_mr.models.integrate`); ``hold_branch``
-        False integrates spencer's z on its loading branches too (:func:`bayes_mr.models.kernel.on_branch`).
+        False integrates the hysteretic state on its loading branches too (:func:`bayes_mr.models.branch.on_branch`).
         """
         cst = np.zeros(kernel.CONST_SIZE)
         cst[kernel.K_MASS] = float(mass) if mass else 1.0

@@ -145,7 +145,7 @@ def simulate(
     hold_branch : bool
         Hold ``spencer``'s z at its saturation through an interval on a loading
         branch, where that is the law's own solution
-        (:func:`~bayes_mr.models.kernel.on_branch`); False integrates it there
+        (:func:`~bayes_mr.models.branch.on_branch`); False integrates it there
         too, as the UKF's sigma points are.
     schedule : ndarray of int, shape (S·(N-1),), optional
         Replay these sub-steps for every member instead of choosing them (a

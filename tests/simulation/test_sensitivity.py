@@ -293,7 +293,7 @@ def test_ros2_intervals_fall_back_to_finite_differences():
     is made; the sensitivity kernel refuses such a schedule."""
     from bayes_mr.simulation.simulate import tally
 
-    # low_velocity_rolloff: the state is not held on its branches (kernel.on_branch), where ROS2 takes them
+    # low_velocity_rolloff: the state is not held on its branches (branch.on_branch), where ROS2 takes them
     name, values = "dahl+low_velocity_rolloff", {**DAHL, "c_s": 5e4}
     lik = OutputError(name, _record(name, values))
     coords = lik.par.coords

@@ -47,7 +47,7 @@ def _filtered_force(record, truth: dict, reading: str) -> tuple[np.ndarray, np.n
     rows, h = problem.inputs.rows, problem.inputs.dt
     force = np.array([K.measure(args["lay"], args["cst"], theta, k * h, rows[k], out["states"][k, :ns].copy(), 1)[0]
                       for k in range(rows.shape[0])])
-    # the filter integrates z on its loading branches too (the simulator holds it there: kernel.on_branch)
+    # the filter integrates z on its loading branches too (the simulator holds it there: branch.on_branch)
     return force, simulate(lik.model, lik.inputs, theta, hold_branch=False)["force"]
 
 
