@@ -13,8 +13,8 @@ is timed, and every simulation it makes is counted (:func:`bayes_mr.simulation.s
 parameter sets simulated on their own sub-step choice (residuals, screening) and on a replayed schedule (the
 perturbed sets of the finite-difference Jacobian), the wall time of each kind, and the sub-step statistics of
 the former — mean RK4 sub-steps per sample interval and the share of intervals at the cap ``n_max``.
-Timed as on a machine that has run the package before: the inlined simulator is compiled first, outside the
-timing.
+Timed as on a machine that has run the package before: the inlined simulator and the sensitivity kernel are
+compiled first, outside the timing.
 """
 
 from __future__ import annotations
@@ -92,10 +92,15 @@ def time_lsq(rec, settings=None) -> dict:
     shared machine the steadier figure), its simulation counts (:func:`summarise`), the optimum's
     log-likelihood and the largest |log(θ̂/θ_true)| over the free parameters."""
     from bayes_mr.inference.lsq.least_squares import LSQSettings, fit_lsq
+    from bayes_mr.inference.lsq.refine import Residuals
 
     lik = OutputError("spencer", rec)
     with compiled_here("inlined"):  # the simulator compiled once for every model, outside the timing
         lik.predict(lik.phi_lo)
+    warm = Residuals(lik, lik.noise_sd, exact=(settings or LSQSettings()).exact_jacobian)
+    mid = 0.5 * (lik.phi_lo + lik.phi_hi)
+    warm(mid)
+    warm.jacobian(mid)  # the sensitivity kernel too (a machine that has run the package has it compiled)
     with tally() as calls:
         t0, c0 = _time.perf_counter(), _time.process_time()
         res = fit_lsq(lik, settings or LSQSettings())

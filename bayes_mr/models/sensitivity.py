@@ -101,7 +101,8 @@ def _interval(lay, cst, p, t, h, a0, a1, n_sub, held, s, S, k, K, T, tmp, am, js
     ``k[0]``, ``K[0]`` hold the rates and their sensitivities at (t, s) on entry. The states follow the
     operations of :func:`bayes_mr.models.integrate.advance` one for one (same nodes, same inputs, same sums);
     ``held``: its ``BRANCH`` mode, the hysteretic state's rate held at 0 and the state set to ±z_s(θ) at the end,
-    so its sensitivity there is that of z_s (:func:`_saturation_partials`), no longer of the state it had.
+    so its sensitivity there is that of z_s (:func:`~bayes_mr.models.partials.saturation_partials`), not that of the
+    state it had.
     """
     ns = lay[L_NS]
     n_th = p.size

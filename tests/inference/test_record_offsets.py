@@ -29,29 +29,29 @@ def _test(i: int, amp: float, freq: float, f0: float):
 
 
 @pytest.fixture(scope="module")
-def tests3():
+def three_tests():
     return RecordSet(tuple(_test(i, *spec) for i, spec in enumerate(TESTS)), record_offsets=True)
 
 
-def test_offsets_are_labelled_per_record_with_their_own_prior(tests3):
-    lik = JointLikelihood("dahl", tests3)
+def test_offsets_are_labelled_per_record_with_their_own_prior(three_tests):
+    lik = JointLikelihood("dahl", three_tests)
     assert lik.record_offsets and lik.names[:7] == ("c", "k", "F_d", "sigma", "f0[0]", "f0[1]", "f0[2]")
     # each offset's flat prior spans ± its own record's force scale (not the set's largest)
     lo, hi = lik.par.coords.lower[4:], lik.par.coords.upper[4:]
     np.testing.assert_allclose(lo, -hi)
-    np.testing.assert_allclose(hi, [record_scales(rec).force for rec in tests3], rtol=1e-12)
+    np.testing.assert_allclose(hi, [record_scales(rec).force for rec in three_tests], rtol=1e-12)
     assert len(set(hi)) == 3
     for r, part in enumerate(lik.parts):
         assert part.model.name == "dahl+force_offset"
         assert part.ranges["f0"] == pytest.approx((lo[r], hi[r]))
     # off by default for a list of records: today's likelihood
-    assert not JointLikelihood("dahl", list(tests3)).record_offsets
+    assert not JointLikelihood("dahl", list(three_tests)).record_offsets
     with pytest.raises(ValueError, match="drop \\+force_offset"):
-        JointLikelihood("dahl+force_offset", tests3)
+        JointLikelihood("dahl+force_offset", three_tests)
 
 
-def test_least_squares_recovers_every_offset(tests3):
-    lik = JointLikelihood("dahl", tests3)
+def test_least_squares_recovers_every_offset(three_tests):
+    lik = JointLikelihood("dahl", three_tests)
     res = fit_joint(lik)
     for r, (_, _, f0) in enumerate(TESTS):
         name = f"f0[{r}]"
@@ -62,13 +62,13 @@ def test_least_squares_recovers_every_offset(tests3):
     assert res.log_likelihood == pytest.approx(float(lik.log_likelihood(lik.joint_x(res.phi, res.sigma))[0]),
                                                rel=1e-9)
     # the result: the shared model, every offset, each record scored at its own
-    s = summary_of(Identify("dahl", LeastSquares(n_draws=100)).fit(tests3, progress=False)).to_dict()
+    s = summary_of(Identify("dahl", LeastSquares(n_draws=100)).fit(three_tests, progress=False)).to_dict()
     assert s["model"] == "dahl" and s["record_offsets"] and {"f0[0]", "f0[1]", "f0[2]"} <= set(s["params"])
     assert all(r["force_nrmse"] < 0.02 for r in s["records"])
 
 
-def test_emcee_recovers_every_offset(tests3):
-    idata = Identify("dahl", estimator("mcmc")).fit(tests3, progress=False)
+def test_emcee_recovers_every_offset(three_tests):
+    idata = Identify("dahl", estimator("mcmc")).fit(three_tests, progress=False)
     s = summary_of(idata).to_dict()
     for r, (_, _, f0) in enumerate(TESTS):
         name = f"f0[{r}]"
@@ -89,18 +89,18 @@ def test_one_record_with_its_offset_is_its_force_offset_fit():
     np.testing.assert_array_equal(lik(x), OutputError("dahl+force_offset", rec)(x))
 
 
-def test_the_ukf_refuses_record_offsets(tests3):
+def test_the_ukf_refuses_record_offsets(three_tests):
     with pytest.raises(ValueError, match="UKF does not estimate per-record force offsets"):
-        Identify("dahl", estimator("ukf")).fit(tests3, progress=False)
+        Identify("dahl", estimator("ukf")).fit(three_tests, progress=False)
 
 
-def test_a_predicted_test_gets_its_own_offset(tests3):
-    train = RecordSet(tests3.records[:2], record_offsets=True)
+def test_a_predicted_test_gets_its_own_offset(three_tests):
+    train = RecordSet(three_tests.records[:2], record_offsets=True)
     idata = Identify("dahl", LeastSquares(n_draws=50)).fit(train, progress=False)
-    held = [tests3[2], tests3[2]]
+    held = [three_tests[2], three_tests[2]]
     profiled = validate_records(idata, held)  # the fit had offsets: each predicted record's is profiled on it
     assert profiled["records"][0]["force_nrmse"] < 0.02 and "record_offset" not in profiled
     assert [r["record_offset"] for r in profiled["records"]] == pytest.approx([5.0, 5.0], abs=0.5)
-    assert validate_records(idata, [tests3[2]])["record_offset"] == pytest.approx(5.0, abs=0.5)
+    assert validate_records(idata, [three_tests[2]])["record_offset"] == pytest.approx(5.0, abs=0.5)
     bare = validate_records(idata, held, record_offsets=False)  # no offset: 5 N missed
     assert bare["force_nrmse"] > 1.2 * profiled["force_nrmse"]
