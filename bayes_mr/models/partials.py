@@ -23,6 +23,14 @@ _sgn = kernel._sgn
 
 
 @hot(inline="always")
+def _motion(lay, a, s):
+    """(x [m], ẋ [m/s]): the imposed motion of a device test, else the frame's states."""
+    if lay[L_KIND] == DEVICE:
+        return a[0], a[1]
+    return s[0], s[1]
+
+
+@hot(inline="always")
 def _column(jp, fp, i, j, d, g_r, c1):
     """Column j of a parameter that enters through ẏ only, given d = ∂ẏ/∂θ_j: ẏ's, ż's through r = ẋ − ẏ,
     and f_r's through c1 ẏ (called once per parameter with its d written out, not from a loop with a branch
@@ -131,10 +139,7 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     """
     o = lay[L_PFORM]
     i = lay[L_SFORM]
-    if lay[L_KIND] == DEVICE:
-        x, xd = a[0], a[1]
-    else:
-        x, xd = s[0], s[1]
+    x, xd = _motion(lay, a, s)
     v = a[2]
     y, z, us = s[i], s[i + 1], s[i + 2]
     ab, c0b, k0, c1b = p[o + 1], p[o + 3], p[o + 4], p[o + 6]
@@ -228,10 +233,7 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     form = lay[L_FORM]
     o = lay[L_PFORM]
     i = lay[L_SFORM]
-    if lay[L_KIND] == DEVICE:
-        x, xd = a[0], a[1]
-    else:
-        x, xd = s[0], s[1]
+    x, xd = _motion(lay, a, s)
     v = a[2]
     z = s[i]
     m_k = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
