@@ -141,6 +141,16 @@ def _kernel_rows(r: dict) -> list[tuple[str, str]]:
         else:
             rows.append((f"simulate, {form}, structure test, per sample (generic → specialised kernel)",
                          f"{v['generic']:.0f} → {v['specialised']:.0f} ns"))
+    for form, v in r.get("simulate_stiff_corners", {}).items():
+        held, plain = (f"{v[f'{how}_{cap}']['ns_per_sample']:.0f}" for how, cap in (("held", 400), ("rk4", 400)))
+        caps = sorted({int(k.split("_")[1]) for k in v if k.startswith("held_")})
+        rows.append((f"simulate, {form}, the stiffest {v['timed']} of {v['draws']} prior draws, per sample, cap "
+                     f"{caps[0]} → {caps[-1]} sub-steps: branch held ({v[f'held_{caps[0]}']['substeps_per_interval']:.2f}"
+                     f" sub-steps per interval, {100 * v[f'held_{caps[-1]}']['share_at_cap']:.2g} % at the cap) / "
+                     f"every interval integrated ({v[f'rk4_{caps[0]}']['substeps_per_interval']:.2f}, "
+                     f"{100 * v[f'rk4_{caps[-1]}']['share_at_cap']:.2g} %)",
+                     f"{held} → {v[f'held_{caps[-1]}']['ns_per_sample']:.0f} ns / "
+                     f"{plain} → {v[f'rk4_{caps[-1]}']['ns_per_sample']:.0f} ns"))
     rows.append(("specialised kernel speedup, dahl structure step", f"{r['kernel_speedup']:.1f}×"))
     if "inlined_speedup" in r:
         rows.append(("inlined kernel speedup (any model, before its specialised kernel), dahl structure step",

@@ -168,3 +168,19 @@ def test_a_saturated_loading_branch_is_held_at_the_same_accuracy(name, values, k
         assert n_held <= 1.05 * n_int, (n_held, n_int)
     # the schedule it wrote replays its numbers
     np.testing.assert_array_equal(simulate(model, inputs, theta, schedule=held.schedule[0])[channel], held[channel])
+
+
+def test_the_stiffest_prior_draws_cost_no_more_at_a_higher_cap():
+    """The bench's stiff corners (:func:`bayes_mr.bench.kernels.stiff_corners`), on a short record: with the branch
+    held no interval reaches the cap and the sub-steps are those of the lower cap, and the held run takes no more
+    sub-steps than the plain RK4 one (the bench's timings themselves are not asserted: a machine's speed is not a
+    test)."""
+    from bayes_mr.bench.kernels import stiff_corners
+
+    out = stiff_corners(forms=("bouc-wen",), duration=1.0, draws=20, repeats=1)["bouc-wen"]
+    assert out["timed"] == 2
+    low, high = out["held_400"], out["held_1600"]
+    assert low["share_at_cap"] == high["share_at_cap"] == 0.0
+    assert low["substeps_per_interval"] == high["substeps_per_interval"]
+    assert low["completed"] == 2
+    assert low["substeps_per_interval"] <= out["rk4_400"]["substeps_per_interval"]

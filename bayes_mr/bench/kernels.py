@@ -10,6 +10,12 @@ the kernel figures live next to nothing else:
   kernel compiled yet (:func:`bayes_mr._compile.specialise.inlined`).
 * ``kernel_speedup`` — generic over specialised for the dahl structure step,
   same run; ``inlined_speedup`` — generic over inlined, same step.
+* ``simulate_stiff_corners`` — ``{form: {...}}`` for ``dahl`` and ``bouc-wen``: the stiffest tenth of 100 draws
+  from the prior box (those whose plain RK4 run needs the most sub-steps), a structure test on the first 10 s
+  of thesis signal I, one thread: ns per sample, RK4 sub-steps per interval and the share of intervals at the
+  sub-step cap, at caps 400 and 1600, with the hysteretic state held on its loading branch (the simulator as
+  it runs) and without (``hold_branch=False``: every interval integrated, the code path before the hold).
+  Where the law is solved exactly the cost does not grow with the cap and no interval reaches it.
 * ``compile_s`` — ``{"cold": s, "warm": s}``: a fresh process simulating dahl
   with an empty kernel cache (compiles), then a second one with that cache
   (loads the machine code from disk); import time excluded.
@@ -89,6 +95,57 @@ def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) 
     return out
 
 
+#: The forms, the caps and the share of the draws ``simulate_stiff_corners`` times (module docstring).
+STIFF_FORMS, STIFF_CAPS, STIFF_SHARE = ("dahl", "bouc-wen"), (400, 1600), 0.1
+
+
+def stiff_corners(forms=STIFF_FORMS, duration: float = 10.0, draws: int = 100, repeats: int = 3,
+                  seed: int = 0) -> dict:
+    """``simulate_stiff_corners`` (module docstring): the cost of the stiffest prior draws, by sub-step cap."""
+    import numba
+    from scipy.stats import qmc
+
+    from bayes_mr.likelihood.output_error import OutputError
+    from bayes_mr.models.integrate import steps
+    from bayes_mr.simulation.simulate import synthesize
+
+    sig = thesis_signal("I")
+    n = min(sig.time.size, int(round(duration / (sig.time[1] - sig.time[0]))) + 1)
+    inputs = {k: v[:n] for k, v in sig.as_input("structure").items()}
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    out = {}
+    try:
+        for form in forms:
+            m = get_model(form)
+            rec = synthesize(m, m.theta("structure", {}), sig.time[:n], inputs, mass=50.0, seed=seed,
+                             source="bench: stiff corners")
+            lik = OutputError(m, rec)
+            u = qmc.LatinHypercube(d=len(lik.phi_lo), seed=seed).random(draws)
+            phi = lik.phi_lo + u * (lik.phi_hi - lik.phi_lo)
+            plain = lik.simulate(phi, hold_branch=False, n_max=max(STIFF_CAPS))
+            load = np.where(plain.ok, steps(plain.schedule).mean(axis=1), -1.0)
+            stiff = phi[np.argsort(load)[::-1][:max(1, int(round(STIFF_SHARE * draws)))]]
+            rows = {}
+            for hold in (True, False):
+                for cap in STIFF_CAPS:
+                    sim = lik.simulate(stiff, hold_branch=hold, n_max=cap)  # also compiles before the timing
+                    best = np.inf
+                    for _ in range(repeats):
+                        t0 = _time.perf_counter()
+                        lik.simulate(stiff, hold_branch=hold, n_max=cap)
+                        best = min(best, _time.perf_counter() - t0)
+                    k = steps(sim.schedule)
+                    rows[f"{'held' if hold else 'rk4'}_{cap}"] = {
+                        "ns_per_sample": best / (stiff.shape[0] * (n - 1)) * 1e9,
+                        "substeps_per_interval": float(k.mean()), "share_at_cap": float(np.mean(k >= cap)),
+                        "completed": int(sim.ok.sum())}
+            out[form] = {"draws": draws, "timed": int(stiff.shape[0]), **rows}
+    finally:
+        numba.set_num_threads(threads)
+    return out
+
+
 def compile_seconds() -> dict:
     """Cold (empty cache, compiles) and warm (loads from disk) first call of the dahl kernel, each in a fresh process."""
     root = Path(__file__).resolve().parents[2]  # the source tree that holds bayes_mr/
@@ -108,4 +165,4 @@ def kernel_bench() -> dict:
     return {"simulate_ns_per_step": ns,
             "kernel_speedup": ns["dahl"]["generic"] / ns["dahl"]["specialised"],
             "inlined_speedup": ns["dahl"]["generic"] / ns["dahl"]["inlined"],
-            "compile_s": compile_seconds()}
+            "simulate_stiff_corners": stiff_corners(), "compile_s": compile_seconds()}
