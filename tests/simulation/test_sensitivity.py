@@ -230,13 +230,10 @@ def _forced_record(name, values, seed=5, n=900):
 
 @pytest.mark.parametrize("kind, name", [("structure", "dahl"), ("structure", "spencer+force_offset"),
                                         ("forced", "bouc-wen")])
-def test_least_squares_jacobian_is_exact_on_several_channels(kind, name, monkeypatch):
+def test_least_squares_jacobian_is_exact_on_several_channels(kind, name):
     """A structure test (displacement, acceleration) and a forced one (three channels, m estimated): the
-    sensitivities' Jacobian in φ, each channel over its own σ, agrees with central differences, and is used
-    where least squares is told to (``EXACT_KINDS``)."""
-    from bayes_mr.inference.lsq import refine
-
-    monkeypatch.setattr(refine, "EXACT_KINDS", frozenset({"device", "structure", "forced"}))
+    sensitivities' Jacobian in φ, each channel over its own σ, agrees with central differences, and least
+    squares uses it."""
     record = (structure_record(name, {"f0": 5.0} if "force_offset" in name else {}, n=900)[0] if kind == "structure"
               else _forced_record(name, {"c": 100.0, "k": 2e4, "beta1": 2e4, "gamma": -5e3, "n": 1.0}))
     lik = OutputError(name, record)

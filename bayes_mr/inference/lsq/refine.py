@@ -24,13 +24,6 @@ from bayes_mr.inference.lsq.subfit import stiff
 from bayes_mr.simulation import sensitivity
 
 
-#: Kinds of test whose least-squares Jacobians come from the sensitivities. Structure and forced tests have
-#: them too (:func:`~bayes_mr.simulation.sensitivity.output_sensitivities`, and :class:`Residuals` stacks their
-#: channels), but their reference fits (``tests/golden``) hold finite-difference Jacobians, which move the
-#: structure dahl UKF fit's Laplace-widened SD of k by 1.8e-5 relative against exact ones, beyond those
-#: references' 1e-5: adding the two kinds here is a regeneration of those references, made on purpose.
-EXACT_KINDS = frozenset({"device"})
-
 
 def standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
     """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
@@ -60,13 +53,12 @@ class Residuals:
 
     @staticmethod
     def has_exact(lik: OutputError) -> bool:
-        """Whether ``lik``'s Jacobian comes from sensitivities: a kind of :data:`EXACT_KINDS`, a covered model,
-        channels that have them
+        """Whether ``lik``'s Jacobian comes from sensitivities: a covered model, channels that have them
         (:data:`~bayes_mr.simulation.sensitivity.CHANNELS`: a device test's force, a structure or forced test's
         displacement, velocity and acceleration), and residuals that are not prewhitened (iid, or AR before
         its orders are chosen). Each evaluation also needs a schedule without ROS2 intervals
         (:func:`~bayes_mr.simulation.sensitivity.replayable`), else it takes finite differences."""
-        return (lik.kind in EXACT_KINDS and sensitivity.covered(lik.model, lik.kind)
+        return (sensitivity.covered(lik.model, lik.kind)
                 and all(c in sensitivity.CHANNELS[lik.kind] for c in lik.channels)
                 and (lik.residual.kind == "iid" or not lik.residual.resolved))
 
