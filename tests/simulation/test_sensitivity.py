@@ -264,7 +264,8 @@ def _theta_near(lik, kind, record):
 
 
 def test_models_without_sensitivities_keep_finite_differences():
-    """A form or effect the kernel has no partials of is not covered: its Jacobian stays finite differences."""
+    """A form or effect the kernel has no partials of is not covered: its Jacobian stays finite differences; a
+    covered one takes the sensitivities in a structure test as in a device test."""
     for name in ("spencer", "spencer+force_offset", "dahl", "lugre+voltage_dependence+field_decay",
                  "bouc-wen+low_velocity_rolloff", "normalized-bouc-wen+sensor_delay"):
         assert covered(name, "device"), name
@@ -278,7 +279,7 @@ def test_models_without_sensitivities_keep_finite_differences():
     lik = OutputError("dahl+small_amplitude_regime", _record("dahl+small_amplitude_regime", {}))
     assert not Residuals(lik, lik.noise_sd).exact
     lik = OutputError("dahl", structure_record("dahl", {}, n=600)[0])
-    assert not Residuals(lik, lik.noise_sd).exact  # covered, but least squares keeps differences there by default
+    assert Residuals(lik, lik.noise_sd).exact  # covered: least squares takes the sensitivities in any kind
     with pytest.raises(ValueError, match="no exact sensitivities"):
         force_sensitivities("dahl+small_amplitude_regime", device_inputs(0.008),
                             get_model("dahl+small_amplitude_regime").theta("device", {}), np.ones(1499, int))
