@@ -114,6 +114,9 @@ class Candidate:
         Why the fit failed.
     restart : dict or None
         The global search of a named extension (:func:`.search.restarted`); None when it did not run.
+    input_noise : dict or None
+        The score the effect reaches on a device test's input-noise null (:mod:`.input_noise`: ``score`` and
+        the motion noise used); None when it was not run.
     """
 
     name: str
@@ -128,6 +131,7 @@ class Candidate:
     error: str | None = None
     runs: list = field(default_factory=list)
     restart: dict | None = None
+    input_noise: dict | None = None
 
     @property
     def channel(self) -> str | None:
@@ -148,8 +152,9 @@ class Candidate:
             out["channel"] = self.channel
         if self.error:
             out["error"] = self.error
-        if self.restart is not None:
-            out["restart"] = {k: (_num(v) if isinstance(v, float) else v) for k, v in self.restart.items()}
+        for key in ("restart", "input_noise"):
+            if getattr(self, key) is not None:
+                out[key] = {k: (_num(v) if isinstance(v, float) else v) for k, v in getattr(self, key).items()}
         return out
 
 
@@ -440,5 +445,7 @@ def screen(record: xr.Dataset, base: Fit, effects: list[Effect], *, seed: int = 
 
 
 def passes(c: Candidate, threshold: float = THRESHOLD) -> bool:
-    """The decision: enough evidence, and the extension lowers the record's error."""
-    return c.fit is not None and c.score > threshold and c.mse_ratio < 1.0
+    """The decision: enough evidence, and the extension lowers the record's error; where the input-noise null
+    ran (:mod:`.input_noise`), evidence beyond what the motion's noise alone gives the effect there."""
+    beyond = max(0.0, c.input_noise["score"]) if c.input_noise else 0.0
+    return c.fit is not None and c.score > threshold + beyond and c.mse_ratio < 1.0

@@ -20,6 +20,7 @@ import xarray as xr
 from bayes_mr.execution.executor import local_threads
 from bayes_mr.models import EFFECTS
 from bayes_mr.diagnosis.fits import Fit, global_refit, refit
+from bayes_mr.diagnosis.input_noise import checked
 from bayes_mr.diagnosis.ranking import rank as by_explanation
 from bayes_mr.diagnosis.screen import THRESHOLD, Candidate, applicable, passes, screen, screen_one, scored
 
@@ -131,6 +132,20 @@ def kept(base: Fit, cand: Candidate, *, seed: int = 0) -> Candidate:
     return settled(base, restarted(base, cand, seed=seed))
 
 
+def _beyond_input_noise(record: xr.Dataset, base: Fit, ranked: list[Candidate], threshold: float,
+                        seed: int) -> Candidate | None:
+    """The first of a round's ``ranked`` candidates that passes, its input-noise null included
+    (:func:`.input_noise.checked`; device tests); those checked are replaced in ``ranked`` by their checked
+    selves, so the round reports their null score. None when none passes."""
+    for i, cand in enumerate(ranked):
+        if not passes(cand, threshold):
+            break  # ranked: those that pass come first
+        ranked[i] = cand = checked(record, base, cand, seed=seed)
+        if passes(cand, threshold):
+            return cand
+    return None
+
+
 def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOLD, max_effects: int = 3,
                    seed: int = 0, progress=None, executor=None,
                    candidates=None) -> tuple[list[Candidate], list[list[Candidate]]]:
@@ -161,8 +176,8 @@ def forward_select(record: xr.Dataset, base: Fit, *, threshold: float = THRESHOL
         ranked = by_explanation(screen(record, current, effects, seed=seed, progress=progress, executor=executor),
                                 threshold)
         rounds.append(ranked)
-        best = ranked[0]
-        if not passes(best, threshold):
+        best = _beyond_input_noise(record, current, ranked, threshold, seed)
+        if best is None:
             break
         best = kept(current, best, seed=seed)
         selected.append(best)
