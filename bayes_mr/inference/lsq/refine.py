@@ -24,7 +24,6 @@ from bayes_mr.inference.lsq.subfit import stiff
 from bayes_mr.simulation import sensitivity
 
 
-
 def standardised(lik: OutputError, yhat: np.ndarray, sd: np.ndarray) -> np.ndarray:
     """(y − ŷ)/σ over valid samples (n_valid, C); prewhitened under a chosen AR model (GLS)."""
     if lik.residual.kind == "iid":  # with no masked sample, no boolean-indexed copies (0.7 ms at 30 s, 1 kHz)
