@@ -28,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time as _time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -68,19 +69,28 @@ def _best_ns(fn, args, n_steps: int, repeats: int) -> float:
     return best / n_steps * 1e9
 
 
-def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) -> dict:
-    """ns per sample of the generic, inlined and specialised simulator, per form (structure test, one thread)."""
+@contextmanager
+def _one_thread():
+    """numba on one thread inside the block (a per-sample time of one run, not of the thread pool)."""
     import numba
 
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
+
+
+def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) -> dict:
+    """ns per sample of the generic, inlined and specialised simulator, per form (structure test, one thread)."""
     sig = thesis_signal("I")
     n = min(sig.time.size, int(round(duration / (sig.time[1] - sig.time[0]))) + 1)
     rows = np.zeros((n, 3))
     rows[:, 0] = sig.as_input("structure")["ground_acceleration"][:n]
     dt = float(sig.time[1] - sig.time[0])
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
     out = {}
-    try:
+    with _one_thread():
         for form in forms:
             m = get_model(form)
             lay, cst = m.layout("structure"), m.constants(50.0)
@@ -90,8 +100,6 @@ def simulate_ns_per_step(forms=FORMS, duration: float = 10.0, repeats: int = 5) 
             out[form] = {"generic": _best_ns(run_batch, args, n - 1, repeats),
                          "inlined": _best_ns(inlined(run_batch), args, n - 1, repeats),
                          "specialised": _best_ns(specialised(run_batch, lay), args, n - 1, repeats)}
-    finally:
-        numba.set_num_threads(threads)
     return out
 
 
@@ -102,7 +110,6 @@ STIFF_FORMS, STIFF_CAPS, STIFF_SHARE = ("dahl", "bouc-wen"), (400, 1600), 0.1
 def stiff_corners(forms=STIFF_FORMS, duration: float = 10.0, draws: int = 100, repeats: int = 3,
                   seed: int = 0) -> dict:
     """``simulate_stiff_corners`` (module docstring): the cost of the stiffest prior draws, by sub-step cap."""
-    import numba
     from scipy.stats import qmc
 
     from bayes_mr.likelihood.output_error import OutputError
@@ -112,10 +119,8 @@ def stiff_corners(forms=STIFF_FORMS, duration: float = 10.0, draws: int = 100, r
     sig = thesis_signal("I")
     n = min(sig.time.size, int(round(duration / (sig.time[1] - sig.time[0]))) + 1)
     inputs = {k: v[:n] for k, v in sig.as_input("structure").items()}
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
     out = {}
-    try:
+    with _one_thread():
         for form in forms:
             m = get_model(form)
             rec = synthesize(m, m.theta("structure", {}), sig.time[:n], inputs, mass=50.0, seed=seed,
@@ -141,8 +146,6 @@ def stiff_corners(forms=STIFF_FORMS, duration: float = 10.0, draws: int = 100, r
                         "substeps_per_interval": float(k.mean()), "share_at_cap": float(np.mean(k >= cap)),
                         "completed": int(sim.ok.sum())}
             out[form] = {"draws": draws, "timed": int(stiff.shape[0]), **rows}
-    finally:
-        numba.set_num_threads(threads)
     return out
 
 
