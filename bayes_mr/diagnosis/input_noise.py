@@ -43,9 +43,9 @@ def motion_noise(record: xr.Dataset) -> dict[str, float]:
     return {c: differencing_sd(record[c].values[valid]) for c in MOTION if c in record}
 
 
-def null_record(base: Fit, record: xr.Dataset, seed: int = 0) -> xr.Dataset | None:
-    """The null record of the module docstring, or None when the record has no motion noise to model."""
-    noise = motion_noise(record)
+def null_record(base: Fit, record: xr.Dataset, noise: dict[str, float], seed: int = 0) -> xr.Dataset | None:
+    """The null record of the module docstring, the motion re-noised at ``noise`` (:func:`motion_noise`), or None
+    when the record has no motion noise to model."""
     if not any(s > 0 for s in noise.values()):
         return None
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x1A7]))
@@ -61,9 +61,10 @@ def null_record(base: Fit, record: xr.Dataset, seed: int = 0) -> xr.Dataset | No
 
 def null_score(record: xr.Dataset, base: Fit, cand: Candidate, seed: int = 0) -> dict:
     """The score ``cand``'s effect reaches on the null record of ``base`` (``score``; 0 when the record's motion
-    has no noise), with the motion noise used and the null base's and extension's log-likelihood gain."""
-    null = null_record(base, record, seed)
-    noise = {f"{k}_sd": v for k, v in motion_noise(record).items()}
+    has no noise), its log-likelihood gain over the base refitted there, and the motion noise used."""
+    sd = motion_noise(record)
+    null = null_record(base, record, sd, seed)
+    noise = {f"{k}_sd": v for k, v in sd.items()}
     if null is None:
         return {"score": 0.0, **noise}
     lik = type(base.lik)(base.model, null, ranges=effect_ranges(base.model, null, base.lik.scales),
