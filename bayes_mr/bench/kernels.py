@@ -29,6 +29,7 @@ import sys
 import tempfile
 import time as _time
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -134,15 +135,11 @@ def stiff_corners(forms=STIFF_FORMS, duration: float = 10.0, draws: int = 100, r
             rows = {}
             for hold in (True, False):
                 for cap in STIFF_CAPS:
-                    sim = lik.simulate(stiff, hold_branch=hold, n_max=cap)  # also compiles before the timing
-                    best = np.inf
-                    for _ in range(repeats):
-                        t0 = _time.perf_counter()
-                        lik.simulate(stiff, hold_branch=hold, n_max=cap)
-                        best = min(best, _time.perf_counter() - t0)
+                    run = partial(lik.simulate, hold_branch=hold, n_max=cap)
+                    sim = run(stiff)
                     k = steps(sim.schedule)
                     rows[f"{'held' if hold else 'rk4'}_{cap}"] = {
-                        "ns_per_sample": best / (stiff.shape[0] * (n - 1)) * 1e9,
+                        "ns_per_sample": _best_ns(run, (stiff,), stiff.shape[0] * (n - 1), repeats),
                         "substeps_per_interval": float(k.mean()), "share_at_cap": float(np.mean(k >= cap)),
                         "completed": int(sim.ok.sum())}
             out[form] = {"draws": draws, "timed": int(stiff.shape[0]), **rows}
