@@ -160,6 +160,23 @@ def _kernel_rows(r: dict) -> list[tuple[str, str]]:
     return rows
 
 
+def _adaptation(r: dict) -> str:
+    """The Bouc–Wen posterior's pilot and adaptation steps and its evaluations, where the bench file has them."""
+    if "boucwen_mcmc_pilot_steps" not in r:
+        return ""
+    return (f"{r['boucwen_mcmc_evaluations']} evaluations in all ({r['boucwen_mcmc_pilot_steps']} pilot and "
+            f"adaptation steps), then ")
+
+
+def _chain_summary(r: dict, key: str) -> str:
+    """τ_max and R-hat_max of a bench chain, or why it has none (a wall-time cap that fell in the adaptation leaves
+    the chain proper too few steps to estimate either)."""
+    tau, rhat = r.get(f"{key}_tau_max"), r.get(f"{key}_rhat_max")
+    if tau is None or rhat is None:
+        return f"τ and R-hat not estimable from {r[f'{key}_steps']} step(s) of the chain proper"
+    return f"τ_max {tau:.0f}, R-hat_max {rhat:.3f}"
+
+
 def _spencer_rows(r: dict) -> list[tuple[str, str]]:
     """Rows of ``bench --spencer`` (absent from bench files written without it)."""
     if "spencer_lsq_s" not in r:
@@ -223,9 +240,10 @@ def bench_section(r: dict) -> str:
         rows += [(f"least squares, bouc-wen, {r['boucwen_record']}, {r['boucwen_input_interp']} inputs "
                   f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)",
                   f"{r['boucwen_lsq_s']:.0f} s"),
-                 (f"emcee, same: {r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} walkers, τ_max "
-                  f"{r['boucwen_mcmc_tau_max']:.0f}, R-hat_max {r['boucwen_mcmc_rhat_max']:.3f}, mean within "
-                  f"{r['boucwen_mcmc_max_z']:.2g} sd ({verdict})", f"{r['boucwen_mcmc_s']:.0f} s")]
+                 (f"emcee, same: {_adaptation(r)}{r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} "
+                  "walkers, "
+                  f"{_chain_summary(r, 'boucwen_mcmc')}, mean within {r['boucwen_mcmc_max_z']:.2g} sd ({verdict})",
+                  f"{r['boucwen_mcmc_s']:.0f} s")]
     rows += _spencer_rows(r)
     if "compare_s" in r:
         where = f"{r['compare_workers']} workers" if r["compare_workers"] else "in process"
