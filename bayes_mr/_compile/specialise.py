@@ -9,15 +9,18 @@ compiled again for that literal type — the layout becomes a compile-time const
 the branches of the effects the model does not have. The physics stays in one place: a new effect added to
 the generic kernel is specialised with no change here.
 
-Compiling one takes about two minutes, so ``auto`` never waits for it: it starts the compile in a child process
+Compiling one takes ten minutes or more of a core and 5–6 GB of memory (the full kernel of a structure test,
+measured with two compiles sharing two cores: spencer 608 s, normalized-bouc-wen 675 s, lugre 681 s, bouc-wen 839 s,
+dahl 856 s; ``bayes-mr bench`` times dahl's alone as ``compile_s``), so ``auto`` never waits for it: it starts the
+compile in a child process
 (:mod:`bayes_mr._compile.worker`) and runs the generic kernel until the child marks the machine code ready
 on disk (:class:`_Auto`).
 
-Nearly all of those two minutes are the physics inlined at numba-IR level (:data:`INLINE`): the same kernel with
-the layout constant and nothing inlined there, the *quick* kernel (:data:`QUICK_INLINE`), compiles in ~20 s.
-On one core, structure test, in ns per sample (full specialised / quick / inlined / generic; compile of the
-first two 121-132 s against 20-23 s; ``bayes-mr bench`` measures these, :mod:`bayes_mr.bench.kernels`): dahl
-43 / 72 / 86 / 171, bouc-wen 190 / 240 / 259 / 497, spencer 356 / 351 / 438 / 616. So once a layout's work pays, ``auto`` compiles both: the quick kernel at once, and the
+Nearly all of that is the physics inlined at numba-IR level (:data:`INLINE`): the same kernel with the layout
+constant and nothing inlined there, the *quick* kernel (:data:`QUICK_INLINE`), compiles in a small fraction of it.
+The full kernel is 1.4–5× faster per sample than the generic one (dahl the most, spencer the least: ``bayes-mr
+bench``'s ``simulate_ns_per_step``, :mod:`bayes_mr.bench.kernels`, docs/performance.md), the quick one between the
+two. So once a layout's work pays, ``auto`` compiles both: the quick kernel at once, and the
 full one at the lowest CPU priority (:data:`BACKGROUND_NICE`), on the cores the job leaves idle: it runs where it
 is ready (in a later process, or later in a long one) and never takes a core from the job that asked for it: at
 the job's own priority, on an empty cache and 2 cores, the full compile doubles the time of ``make run``'s
@@ -37,8 +40,8 @@ every module the kernel reaches, so editing the physics gives new modules instea
 concurrent processes (pytest workers, Dask) never see a partial file; two processes compiling the same
 kernel at once both succeed, and numba's own index writes are atomic too. A background compile is claimed by
 the first process that starts it (``*.claim``, :func:`bayes_mr._compile.worker.claim`): processes sharing a
-cache start one child per kernel, not one each (a bouc-wen kernel's full compile takes minutes and over a GB of
-memory: one per process would multiply both).
+cache start one child per kernel, not one each (a full compile takes over ten minutes and several GB of memory:
+one per process would multiply both).
 """
 
 from __future__ import annotations
@@ -70,12 +73,12 @@ KERNELS_ENV = "BAYES_MR_KERNELS"
 #: argument types runs at once. The quick one costs ~20 s of one core and saves 80-260 ns per sample-step on the
 #: generic kernel (module docstring): it pays back within the process after ~1e8-2.5e8 steps and at once in later
 #: ones (the disk cache), so both start at 2e8 — an emcee posterior or a 100-prior UKF training, not a
-#: least-squares fit or one of diagnose's dozens of candidate refits. The full one (~2 min) uses idle cores only.
+#: least-squares fit or one of diagnose's dozens of candidate refits. The full one (10–15 min) uses idle cores only.
 AUTO_WORK = 2e8
 #: ``auto``: the background compile of the inlined kernel (:func:`inlined`, every layout) starts once this many
-#: sample-steps have been asked of the generic kernel in the process, over all layouts. ~140 s of one core once per
-#: machine (dahl structure test, alone), it takes the generic step
-#: 1.4-2× faster for every model (dahl 171 -> 86 ns): a diagnose — dozens of layouts, none worth its own compile — pays.
+#: sample-steps have been asked of the generic kernel in the process, over all layouts. About 6 minutes of a core
+#: once per machine, it takes the generic step 1.2–1.8× faster for every model (``simulate_ns_per_step``): a
+#: diagnose — dozens of layouts, none worth its own compile — pays.
 INLINED_WORK = 2e7
 #: Kernels ``auto`` gives the inlined tier: the simulator's (measured above). A UKF job is either too short to
 #: pay for any compile or long enough for its model's specialised kernel (``AUTO_WORK``), and the filter's
