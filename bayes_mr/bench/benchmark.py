@@ -277,7 +277,7 @@ def lsq_and_mcmc(seed: int = 0, duration: float = 25.0, fs: float = 1000.0) -> d
 
 #: Work budget of the Bouc–Wen benchmark's posterior [log-density evaluations, walker-steps]: its pilot (200 steps of
 #: 4d walkers, 5 600), the chain proper's first 250 steps (4 000) and what is left for adaptation rounds; about
-#: 10 minutes on two cores at the ~35 ms an evaluation of the 327 680 interpolated samples costs.
+#: 11 minutes on two cores at the ~35 ms an evaluation of the 327 680 interpolated samples costs.
 BOUCWEN_MCMC_EVALUATIONS = 20_000
 #: Its wall-time guard [s]: far above what the budget takes, so it decides nothing on a machine of usual speed.
 BOUCWEN_MCMC_GUARD_S = 1800.0

@@ -426,7 +426,9 @@ def test_fit_mcmc_result_in_the_package_schema(tmp_path):
     lik = OutputError("dahl", rec)
     lsq = fit_lsq(lik)
     res = fit_mcmc(lik, lsq=lsq, settings=MCMCSettings(seed=0, progress=False, max_steps=200, check_every=100))
-    assert res.chain.shape == (200, 8, 6) and not res.converged  # 24 walkers in the pilot, eight independent after it
+    # 24 walkers in the pilot, eight independent after it. Whether these 200 steps pass the convergence check is
+    # not this test's subject: it falls either way between machines running the same pinned packages
+    assert res.chain.shape == (200, 8, 6)
     idata = results.build(lik, mcmc_posterior(lik, res, lsq, evidence={"laplace": laplace_evidence(lsq)}))
     post = idata.posterior
     assert set(post.data_vars) == {"c", "k", "F_d", "sigma"}
