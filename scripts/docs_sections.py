@@ -160,12 +160,11 @@ def _kernel_rows(r: dict) -> list[tuple[str, str]]:
     return rows
 
 
-def _adaptation(r: dict) -> str:
-    """The Bouc–Wen posterior's pilot and adaptation steps and its evaluations, where the bench file has them."""
-    if "boucwen_mcmc_pilot_steps" not in r:
+def _adaptation(r: dict, key: str) -> str:
+    """A bench chain's pilot and adaptation steps and its evaluations, where the bench file has them."""
+    if f"{key}_pilot_steps" not in r:
         return ""
-    return (f"{r['boucwen_mcmc_evaluations']} evaluations in all ({r['boucwen_mcmc_pilot_steps']} pilot and "
-            f"adaptation steps), then ")
+    return f"{r[f'{key}_evaluations']} evaluations in all ({r[f'{key}_pilot_steps']} pilot and adaptation steps), then "
 
 
 def _chain_summary(r: dict, key: str) -> str:
@@ -227,8 +226,7 @@ def bench_section(r: dict) -> str:
         ("best trained run, largest parameter error", f"{100 * worst:.2f} %"),
         (f"least squares, {r['mcmc_record']}", f"{r['lsq_s']:.1f} s"),
         (f"emcee posterior, {r['mcmc_record']}: {r['mcmc_steps']} steps × {r['mcmc_walkers']} walkers, "
-         f"τ_max {r['mcmc_tau_max']:.0f}, R-hat_max {r['mcmc_rhat_max']:.3f}"
-         f"{'' if r['mcmc_converged'] else ' (NOT converged)'}", f"{r['mcmc_s']:.0f} s"),
+         f"{_chain_summary(r, 'mcmc')}{'' if r['mcmc_converged'] else ' (NOT converged)'}", f"{r['mcmc_s']:.0f} s"),
         (f"diagnose, {r['diagnose_record']}: cause named {r['diagnose_cause']}, MSE ratio "
          f"{r['diagnose_mse_ratio']:.3f}", f"{r['diagnose_s']:.0f} s"),
     ]
@@ -240,10 +238,9 @@ def bench_section(r: dict) -> str:
         rows += [(f"least squares, bouc-wen, {r['boucwen_record']}, {r['boucwen_input_interp']} inputs "
                   f"(estimate within {r['boucwen_lsq_max_z']:.2g} sd of the true values)",
                   f"{r['boucwen_lsq_s']:.0f} s"),
-                 (f"emcee, same: {_adaptation(r)}{r['boucwen_mcmc_steps']} steps × {r['boucwen_mcmc_walkers']} "
-                  "walkers, "
-                  f"{_chain_summary(r, 'boucwen_mcmc')}, mean within {r['boucwen_mcmc_max_z']:.2g} sd ({verdict})",
-                  f"{r['boucwen_mcmc_s']:.0f} s")]
+                 (f"emcee, same: {_adaptation(r, 'boucwen_mcmc')}{r['boucwen_mcmc_steps']} steps × "
+                  f"{r['boucwen_mcmc_walkers']} walkers, {_chain_summary(r, 'boucwen_mcmc')}, mean within "
+                  f"{r['boucwen_mcmc_max_z']:.2g} sd ({verdict})", f"{r['boucwen_mcmc_s']:.0f} s")]
     rows += _spencer_rows(r)
     if "compare_s" in r:
         where = f"{r['compare_workers']} workers" if r["compare_workers"] else "in process"
