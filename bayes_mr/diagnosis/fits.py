@@ -26,6 +26,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_mr.inference.lsq.least_squares import LSQResult, LSQSettings, fit_lsq, laplace
+from bayes_mr.inference.lsq.memo import simulated
 from bayes_mr.inference.lsq.refine import STALLED, Stall, refine
 from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.models import Model, get_model
@@ -102,7 +103,7 @@ def predict(model: Model, record: xr.Dataset, theta_full: np.ndarray) -> dict[st
 
 def residual_rms(lik: OutputError, phi: np.ndarray) -> np.ndarray:
     """RMS of each channel's residual at φ over valid samples (the ML noise SD)."""
-    yhat, _ = lik.predict(phi)
+    yhat, _ = simulated(lik, phi)
     resid = (lik.y - yhat[0])[lik.valid]
     return np.maximum(np.sqrt(np.mean(resid**2, axis=0)), 1e-12 * np.std(lik.y[lik.valid], axis=0))
 

@@ -66,6 +66,7 @@ from bayes_mr.likelihood.output_error import OutputError
 from bayes_mr.inference import calibrate
 from bayes_mr.inference.lsq import evidence_scale
 from bayes_mr.inference.calibrate import hac_covariance
+from bayes_mr.inference.lsq.memo import simulated
 from bayes_mr.inference.lsq.refine import Residuals, refine, standardised
 from bayes_mr.inference.lsq.subfit import screen
 
@@ -219,7 +220,7 @@ def fit_lsq(lik: OutputError, settings: LSQSettings = LSQSettings(), *, progress
     if lik.residual.kind == "ar" and not lik.residual.resolved:
         say(f"AR orders {lik.choose_residual_orders(phi)} (BIC on the iid fit's residual)")
     if settings.reweight:
-        yhat, _ = lik.predict(phi)
+        yhat, _ = simulated(lik, phi)
         sd = ml_sd(lik, yhat[0])
         res = refine(lik, phi, sd, settings.max_nfev, exact=settings.exact_jacobian)
         phi = res.x
@@ -332,7 +333,7 @@ def laplace(lik: OutputError, phi: np.ndarray, *, starts=None, wall_s: float = 0
     larger (direction by direction) of the HAC/GLS one and that of ``replicas``
     replicas of the model's response to the input noise (:mod:`.calibrate`).
     """
-    yhat, _ = lik.predict(phi)
+    yhat, _ = simulated(lik, phi)
     resid = (lik.y - yhat[0])[lik.valid]
     n_c = resid.shape[0]
     sampled = lik.noise == "sampled"

@@ -20,6 +20,7 @@ import numpy as np
 from scipy import optimize
 
 from bayes_mr.likelihood.output_error import OutputError
+from bayes_mr.inference.lsq.memo import simulated, slopes
 from bayes_mr.inference.lsq.subfit import stiff
 from bayes_mr.simulation import sensitivity
 
@@ -62,7 +63,7 @@ class Residuals:
                 and (lik.residual.kind == "iid" or not lik.residual.resolved))
 
     def __call__(self, phi):
-        yhat, sim = self.lik.predict(phi, **self.options)
+        yhat, sim = simulated(self.lik, phi, **self.options)
         self.schedule = sim.schedule[0]
         self.at = np.array(phi, float)
         r = standardised(self.lik, yhat[0], self.sd)
@@ -119,15 +120,22 @@ class Residuals:
         if not sensitivity.replayable(self.schedule):
             return None
         lik = self.lik
+        n_res = lik.n_valid * len(lik.channels)
+        dy = slopes(lik, phi, self.options, lambda: self._slopes(phi))  # kept beside φ's run (self(φ) above)
+        if dy is None:
+            return np.zeros((n_res, phi.size))
+        # rows as standardised() ravels its (n_valid, C): sample by sample, the channels within a sample
+        return -(dy / self.sd[None, :, None]).reshape(n_res, phi.size)
+
+    def _slopes(self, phi):
+        """∂ŷ/∂φ (n_valid, C, p) at φ on its schedule, or None where the run diverged."""
+        lik = self.lik
         _, dy, failed = sensitivity.output_sensitivities(lik.model, lik.inputs, lik.par.full(phi), self.schedule,
                                                          lik.channels)
         dy = dy[:, :, lik.par.free_idx] * lik.par.coords.dtheta_dphi(phi)
-        n_res = lik.n_valid * len(lik.channels)
         if failed >= 0 or not np.all(np.isfinite(dy)):
-            return np.zeros((n_res, phi.size))
-        # rows as standardised() ravels its (n_valid, C): sample by sample, the channels within a sample
-        dy = dy if lik.valid.all() else dy[lik.valid]
-        return -(dy / self.sd[None, :, None]).reshape(n_res, phi.size)
+            return None
+        return dy if lik.valid.all() else dy[lik.valid]
 
 
 #: Relative cost tolerance of the trust-region refinement: it stops after an accepted step that lowers
