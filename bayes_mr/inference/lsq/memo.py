@@ -8,9 +8,10 @@ deterministic in (likelihood, φ, options), so the repeat is the same numbers: :
 :func:`slopes` hand back the kept ones.
 
 Bounded: at most :data:`MEMO_SIZE` entries and :data:`MEMO_BYTES` of arrays (the newest entry is always
-kept), the least recently used dropped first; an entry holds its likelihood weakly and goes with it. Arrays handed out are
-read-only, so no caller can change what the next one is given. Thread-safe (diagnose refits candidates side
-by side); two threads asking for the same φ at once may both simulate it, which costs time, not numbers.
+kept), the least recently used dropped first; an entry holds its likelihood weakly and goes with it. Arrays
+handed out are read-only, so no caller can change what the next one is given. Thread-safe (diagnose refits
+candidates side by side); two threads asking for the same φ at once may both simulate it, which costs time,
+not numbers.
 """
 
 from __future__ import annotations
