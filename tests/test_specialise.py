@@ -314,6 +314,46 @@ def test_effects_and_kinds(cache, name, kind):
     _assert_same(_both(name, kind))
 
 
+def _sensitivities(name: str, kind: str):
+    from bayes_mr.simulation.sensitivity import output_sensitivities
+    from bayes_mr.simulation.simulate import simulate
+
+    m = get_model(name)
+    inp = _inputs(kind)
+    theta = m.theta(kind, {})
+    sched = simulate(m, inp, theta, ros2=False).schedule[0]
+    return output_sensitivities(m, inp, theta, sched)
+
+
+def test_sensitivities_run_the_kernel_the_choice_gives(monkeypatch):
+    """The sensitivity kernel is chosen like the simulator's (:func:`~bayes_mr._compile.specialise.kernel`), with
+    no work counted: ``auto`` never starts its minutes-long compile (:mod:`bayes_mr.models.sensitivity`)."""
+    from bayes_mr.models.sensitivity import run_sensitivities
+    from bayes_mr.simulation import sensitivity
+
+    asked = []
+
+    def choose(dispatcher, lay, work=0.0):
+        asked.append((dispatcher, work))
+        return dispatcher
+
+    monkeypatch.setattr(sensitivity, "kernel", choose)
+    _sensitivities("dahl+force_offset", "structure")
+    assert asked == [(run_sensitivities, 0.0)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,kind", [("spencer+command_saturation", "device"), ("dahl+force_offset", "structure")])
+def test_specialised_sensitivities_match_generic(cache, monkeypatch, name, kind):
+    monkeypatch.setenv(S.KERNELS_ENV, "generic")
+    y_g, dy_g, failed = _sensitivities(name, kind)
+    monkeypatch.setenv(S.KERNELS_ENV, "specialised")
+    y_s, dy_s, _ = _sensitivities(name, kind)
+    assert failed == -1 and np.isfinite(dy_g).all()
+    np.testing.assert_allclose(y_s, y_g, rtol=1e-12, atol=1e-12 * np.abs(y_g).max())
+    np.testing.assert_allclose(dy_s, dy_g, rtol=1e-12, atol=1e-12 * np.abs(dy_g).max())
+
+
 @pytest.mark.slow
 def test_ukf_outputs_match(cache, monkeypatch):
     from bayes_mr.inference.ukf import filter as ukf

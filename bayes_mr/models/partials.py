@@ -15,8 +15,8 @@ import math
 from bayes_mr._compile.jit import hot
 from bayes_mr.models import kernel
 from bayes_mr.models.kernel import (
-    BW, DAHL, DEVICE, FORCED, K_IMASS, K_SMOOTH, L_ASYM, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_FORM, L_K3, L_KIND, L_LVR,
-    L_MASS, L_NS, L_PFORM, L_PFRAME, L_SF, L_SFORM, L_ST, L_SU, L_VD, LUGRE, NBW, SPENCER,
+    BW, DAHL, DEVICE, FORCED, K_IMASS, K_SMOOTH, L_ASYM, L_CEXP, L_CPOLY, L_CSAT, L_DRIFT, L_F0, L_FDEC, L_FORM,
+    L_K3, L_KIND, L_LVR, L_MASS, L_NS, L_PFORM, L_PFRAME, L_SF, L_SFORM, L_ST, L_SU, L_VD, LUGRE, NBW, SPENCER,
 )
 
 _sgn = kernel._sgn
@@ -41,15 +41,64 @@ def _column(jp, fp, i, j, d, g_r, c1):
 
 
 @hot(inline="always")
-def _saturation(lay, p, u):
-    """(u_e, ∂u_e/∂u, ∂u_e/∂u_s): the command the coefficients see (u_s tanh(u/u_s) with command_saturation,
-    else u; :func:`bayes_mr.models.kernel._saturate`) and its derivatives."""
-    if lay[L_CSAT] < 0:
-        return u, 1.0, 0.0
-    us = p[lay[L_CSAT]]
-    q = u / us
-    th = math.tanh(q)
-    return us * th, 1.0 - th * th, th - q * (1.0 - th * th)
+def _law(lay, p, u):
+    """The current law g(u) the coefficients see (:func:`bayes_mr.models.kernel._saturate`: command_polynomial,
+    then command_saturation, then exponential_saturation; u itself without them) and its derivatives:
+    (g, ∂g/∂u, ∂g/∂b2, ∂g/∂b3, ∂g/∂u_s, ∂g/∂u_e), 0 for a law the model does not have."""
+    g, dg, db2, db3, dus, due = u, 1.0, 0.0, 0.0, 0.0, 0.0
+    if lay[L_CPOLY] >= 0:
+        j = lay[L_CPOLY]
+        db2, db3 = u * u, u * u * u
+        dg = 1.0 + 2.0 * p[j] * u + 3.0 * p[j + 1] * u * u
+        g = u * (1.0 + p[j] * u + p[j + 1] * u * u)
+    if lay[L_CSAT] >= 0:
+        us = p[lay[L_CSAT]]
+        q = g / us
+        th = math.tanh(q)
+        slope = 1.0 - th * th
+        dus = th - q * slope
+        dg, db2, db3 = dg * slope, db2 * slope, db3 * slope
+        g = us * th
+    if lay[L_CEXP] >= 0:
+        ue = p[lay[L_CEXP]]
+        r = abs(g) / ue
+        e = math.exp(-r)
+        due = _sgn(g) * (1.0 - e - r * e)
+        dg, db2, db3, dus = dg * e, db2 * e, db3 * e, dus * e
+        g = _sgn(g) * ue * (1.0 - e)
+    return g, dg, db2, db3, dus, due
+
+
+@hot(inline="always")
+def _law_columns(lay, p, u, jp, fp, i, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer):
+    """The columns of the current laws' parameters (b2, b3, u_s, u_e) at command state ``u``.
+
+    g(u) enters spencer (``spencer`` True) through ẏ, by ``a`` = ∂ẏ/∂g, and its force besides by ``b`` =
+    c1b ẏ (:func:`_column`, with ``g_w`` = g_r and ``c`` = c1); it enters a thesis form's hysteretic force by
+    ``a`` = ∂f_s/∂g, the strength multiplier by ``b`` (:func:`_via_force`) and the force by ``c`` = c_v ẋ.
+    """
+    if lay[L_CPOLY] < 0 and lay[L_CSAT] < 0 and lay[L_CEXP] < 0:
+        return
+    _, _, db2, db3, dus, due = _law(lay, p, u)
+    if lay[L_CPOLY] >= 0:
+        j = lay[L_CPOLY]
+        _law_column(jp, fp, i, j, db2, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
+        _law_column(jp, fp, i, j + 1, db3, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
+    if lay[L_CSAT] >= 0:
+        _law_column(jp, fp, i, lay[L_CSAT], dus, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
+    if lay[L_CEXP] >= 0:
+        _law_column(jp, fp, i, lay[L_CEXP], due, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
+
+
+@hot(inline="always")
+def _law_column(jp, fp, i, j, d, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer):
+    """Column j of a current law's parameter with ∂g/∂θ_j = ``d`` (:func:`_law_columns`)."""
+    if spencer:
+        _column(jp, fp, i, j, a * d, g_w, c)
+        fp[j] += b * d
+    else:
+        _via_force(jp, fp, i, j, a * d, b * d, g_w, inv_cs, eps_ms, eps_zd)
+        fp[j] += c * d
 
 
 @hot(inline="always")
@@ -99,7 +148,7 @@ def _fluid_slope(lay, cst, p, xd):
 def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d, g_r,
                      c1, c1b, yd, jp, fp, i):
     """The effects' columns (:data:`bayes_mr.simulation.sensitivity.COVERED_EFFECTS` of the kernel's):
-    stiffness_drift, asymmetry, command_saturation, field_decay, force_offset, cubic_stiffness and the fluid
+    stiffness_drift, asymmetry, the current laws, field_decay, force_offset, cubic_stiffness and the fluid
     forces. ``force`` is k1 x − F_pre (what the drift scales besides α), ``bracket`` ∂ẏ/∂u_e."""
     if lay[L_DRIFT] >= 0:
         j = lay[L_DRIFT]
@@ -107,11 +156,7 @@ def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s,
         fp[j] += t * force
     if lay[L_ASYM] >= 0:
         _column(jp, fp, i, lay[L_ASYM], alpha0 * m_s * z * sz * inv_d, g_r, c1)
-    if lay[L_CSAT] >= 0:
-        j = lay[L_CSAT]
-        _, _, due = _saturation(lay, p, us)
-        _column(jp, fp, i, j, bracket * due, g_r, c1)
-        fp[j] += c1b * due * yd
+    _law_columns(lay, p, us, jp, fp, i, bracket, c1b * yd, c1, g_r, 0.0, 0.0, 0.0, True)
     if lay[L_FDEC] >= 0:
         jp[i + 2, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
     if lay[L_F0] >= 0:
@@ -147,7 +192,7 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     m_s = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
     sz = _sgn(z)
     a_z = 1.0 + p[lay[L_ASYM]] * sz if lay[L_ASYM] >= 0 else 1.0
-    ue, due, _ = _saturation(lay, p, us)
+    ue, due, _, _, _, _ = _law(lay, p, us)
     alpha0 = p[o] + ab * ue
     alpha = alpha0 * m_s
     c0 = p[o + 2] + c0b * ue
@@ -242,7 +287,7 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     vdf = 1.0
     if lay[L_VD] >= 0:
         gain = p[lay[L_VD]]
-        ue, due, dus = _saturation(lay, p, s[lay[L_SU]])
+        ue, due, _, _, _, _ = _law(lay, p, s[lay[L_SU]])
         vdf = 1.0 + gain * ue
     m_s = m_k * vdf
     sz = _sgn(z)
@@ -333,10 +378,8 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
         d = -g_w * dfs * inv_cs
         js[i, iu] = d
         fs[iu] = dfs + eps_ms * d + m_k * gain * due * eps_zd + p[j + 1] * due * xd
-        if lay[L_CSAT] >= 0:
-            jq = lay[L_CSAT]
-            _via_force(jp, fp, i, jq, m_k * gain * dus * fz, m_k * gain * dus, g_w, inv_cs, eps_ms, eps_zd)
-            fp[jq] += p[j + 1] * dus * xd
+        _law_columns(lay, p, us, jp, fp, i, m_k * gain * fz, m_k * gain, p[j + 1] * xd, g_w, inv_cs, eps_ms, eps_zd,
+                     False)
         if lay[L_FDEC] >= 0:
             jp[iu, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
     if lay[L_LVR] >= 0:

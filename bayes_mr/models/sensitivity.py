@@ -37,16 +37,28 @@ Per stage, about a third is the rates, a third the partials, a third the product
 partials, the coefficients' columns written out instead of a loop with a branch per coefficient, and the
 rates and partials inlined (:data:`deriv_pow`). The run is one thread where the finite differences' batch
 runs on all cores, so on an idle two-core machine a single refinement's Jacobian gains less than its CPU time
-says; fits side by side (a search's starts, diagnose's candidates) and a busy machine gain all of it.
+says; fits side by side (a search's starts, diagnose's candidates) and a busy machine gain all of it. A
+structure test's run costs about eight generic simulations (dahl, 30 s at 1 kHz: 772 ns per sample against
+~100): three states and their sensitivities, and the frame's rows in J_s.
+
+Kernels: :func:`bayes_mr.simulation.sensitivity.output_sensitivities` chooses this kernel through
+:func:`bayes_mr._compile.specialise.kernel`, as the simulator's is chosen. With the layout constant it runs 2.3×
+faster (that dahl run: 772 → 332 ns per sample, best of 30 interleaved runs), but a layout's compile takes
+from under a minute (that dahl layout, 51 s) to many minutes (the test suite's spencer device and dahl structure
+cases, 21 min together), and its "quick" variant is no quicker, since this module inlines its per-stage
+physics itself; the any-layout inlined tier gains nothing (778 ns) for the same reason. So ``auto`` runs a
+specialised sensitivity kernel where one is on disk but never starts its compile (no work is counted towards
+:data:`~bayes_mr._compile.specialise.AUTO_WORK`, and the kernel is not in
+:data:`~bayes_mr._compile.specialise.INLINED_TIER`); ``BAYES_MR_KERNELS=specialised`` compiles it.
 
 Covered (:func:`bayes_mr.simulation.sensitivity.covered`): every form
 (:func:`~bayes_mr.models.partials.spencer_partials`, :func:`~bayes_mr.models.partials.thesis_partials`) in a device, structure or forced test, with any of the effects whose partials they
-have: ``force_offset``, ``stiffness_drift``, ``asymmetry``, ``voltage_dependence`` (thesis forms),
-``command_saturation``, ``field_decay``, ``low_velocity_rolloff`` (thesis forms), ``cubic_stiffness``,
-``shear_thinning``, ``stribeck_friction``; ``inertia`` and ``sensor_delay`` act on the output and are applied
-by :mod:`bayes_mr.simulation.sensitivity`. The others keep finite differences: the effects with discrete
-updates between sub-steps (``field_dynamics``, ``small_amplitude_regime``), the other command laws
-(``command_polynomial``, ``exponential_saturation``) and the library terms. A structure or forced test's
+have: ``force_offset``, ``stiffness_drift``, ``asymmetry``, ``voltage_dependence`` (thesis forms), the current
+laws (``command_polynomial``, ``command_saturation``, ``exponential_saturation``), ``field_decay``,
+``low_velocity_rolloff`` (thesis forms), ``cubic_stiffness``, ``shear_thinning``, ``stribeck_friction``;
+``inertia`` and ``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`.
+The others keep finite differences: the effects with discrete updates between sub-steps (``field_dynamics``,
+``small_amplitude_regime``) and the library terms. A structure or forced test's
 damper-force output has no derivatives here.
 Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``, ``sgn w``) the derivative is that of the side the state is
 on, which is what a finite difference of a step that does not cross it sees.

@@ -16,6 +16,7 @@ from time import perf_counter
 
 import numpy as np
 
+from bayes_mr._compile.specialise import kernel
 from bayes_mr.models import Model, get_model
 from bayes_mr.models.sensitivity import run_sensitivities
 from bayes_mr.simulation.inputs import Inputs
@@ -25,7 +26,7 @@ from bayes_mr.simulation.simulate import OUTPUT_NAMES, delay, note
 #: to the kernel's force here, as :func:`~bayes_mr.simulation.simulate.simulate` applies them (``inertia``,
 #: ``sensor_delay``).
 COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "voltage_dependence",
-                             "command_saturation", "field_decay", "low_velocity_rolloff", "cubic_stiffness",
+                             "command_saturation", "command_polynomial", "exponential_saturation", "field_decay", "low_velocity_rolloff", "cubic_stiffness",
                              "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
 #: Forms, by kind of test, whose partial derivatives it has.
 COVERED_FORMS = {kind: frozenset({"spencer", "normalized-bouc-wen", "dahl", "lugre", "bouc-wen"})
@@ -105,9 +106,12 @@ def output_sensitivities(model: Model | str, inputs: Inputs, theta: np.ndarray, 
     N = inputs.n
     out = np.empty((N, len(OUTPUT_NAMES[kind])))
     dout = np.empty((N, len(CHANNELS[kind]), theta.size))
+    lay = model.layout(kind)
+    # no work counted: under auto a specialised kernel runs where one is on disk, but none is compiled in the
+    # background (its quick compile would take minutes, not seconds: bayes_mr.models.sensitivity, "Kernels")
+    run = kernel(run_sensitivities, lay)
     t0 = perf_counter()
-    failed = run_sensitivities(model.layout(kind), model.constants(inputs.mass), theta, inputs.dt / S, rows, out,
-                               dout, sched, S, inputs.hold)
+    failed = run(lay, model.constants(inputs.mass), theta, inputs.dt / S, rows, out, dout, sched, S, inputs.hold)
     note(1, True, sched[None, :], 0, perf_counter() - t0, sensitivities=True)
     failed = int((failed + S - 1) // S) if failed >= 0 else -1
     names = model.param_names(kind)

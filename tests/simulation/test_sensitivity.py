@@ -39,6 +39,10 @@ CASES = [
     ("spencer+stribeck_friction", {}, "linear", "linear"),
     ("spencer+inertia", {"m_e": 2.0}, "linear", "linear"),
     ("spencer+sensor_delay", {"delay": 0.0023}, "linear", "linear"),
+    ("spencer+command_polynomial", {"b2": 0.4, "b3": -0.08}, "hold", "linear"),
+    ("spencer+exponential_saturation", {"u_e": 0.8}, "linear", "linear"),
+    ("spencer+command_polynomial+command_saturation+exponential_saturation",
+     {"b2": 0.3, "b3": 0.05, "u_s": 1.5, "u_e": 1.2}, "hold", "linear"),
     ("spencer+stiffness_drift+asymmetry+command_saturation+force_offset", {"drift": -0.1, "asym": 0.1, "u_s": 1.2,
                                                                            "f0": 10.0}, "hold", "linear"),
 ]
@@ -60,6 +64,9 @@ THESIS_CASES = [
     ("dahl+low_velocity_rolloff", {**DAHL, "c_s": 500.0}, "linear", "linear"),
     ("lugre+low_velocity_rolloff", {**LUGRE, "c_s": 800.0}, "linear", "linear"),
     ("dahl+voltage_dependence+command_saturation+field_decay", {**DAHL, "u_s": 1.5, "r_d": 0.4}, "hold", "linear"),
+    ("dahl+voltage_dependence+command_polynomial", {**DAHL, "b2": 0.4, "b3": -0.08}, "linear", "linear"),
+    ("lugre+voltage_dependence+exponential_saturation+command_saturation", {**LUGRE, "u_e": 0.8, "u_s": 1.5},
+     "hold", "linear"),
     ("lugre+stiffness_drift+asymmetry+force_offset", {**LUGRE, "drift": 0.2, "asym": 0.25, "f0": 10.0}, "linear",
      "linear"),
     ("lugre+voltage_dependence+low_velocity_rolloff+asymmetry", {**LUGRE, "c_s": 800.0, "asym": 0.2}, "linear",
@@ -267,6 +274,7 @@ def test_models_without_sensitivities_keep_finite_differences():
     """A form or effect the kernel has no partials of is not covered: its Jacobian stays finite differences; a
     covered one takes the sensitivities in a structure test as in a device test."""
     for name in ("spencer", "spencer+force_offset", "dahl", "lugre+voltage_dependence+field_decay",
+                 "lugre+voltage_dependence+command_polynomial", "spencer+exponential_saturation",
                  "bouc-wen+low_velocity_rolloff", "normalized-bouc-wen+sensor_delay"):
         assert covered(name, "device"), name
     for kind in ("structure", "forced"):
@@ -274,7 +282,7 @@ def test_models_without_sensitivities_keep_finite_differences():
     for name, kind in (("spencer+field_dynamics", "device"), ("dahl+small_amplitude_regime", "structure"),
                        ("spencer+small_amplitude_regime", "device"), ("spencer+term(xdot*abs(x))", "device"),
                        ("dahl+small_amplitude_regime", "device"), ("lugre+term(x*x*x)", "forced"),
-                       ("lugre+voltage_dependence+command_polynomial", "device")):
+                       ("lugre+voltage_dependence+field_dynamics", "device")):
         assert not covered(name, kind), name
     lik = OutputError("dahl+small_amplitude_regime", _record("dahl+small_amplitude_regime", {}))
     assert not Residuals(lik, lik.noise_sd).exact
