@@ -263,8 +263,9 @@ def test_rest_start_and_output_at_first_sample():
 
 
 def test_the_compiled_cache_is_keyed_by_every_compiling_source(tmp_path):
-    """An edit of a kernel file changes the cache directory (numba alone checks only a function's own
-    file, so a driver that inlined an edited kernel would load stale machine code); other edits do not."""
+    """An edit of a kernel file's code changes the cache directory (numba alone checks only a function's own
+    file, so a driver that inlined an edited kernel would load stale machine code); other edits, and prose, do
+    not."""
     from bayes_mr._compile.jit import _source_key
 
     (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return x\n")
@@ -272,7 +273,11 @@ def test_the_compiled_cache_is_keyed_by_every_compiling_source(tmp_path):
     key = _source_key(tmp_path)
     (tmp_path / "report.py").write_text("def g():\n    return 2\n")
     assert _source_key(tmp_path) == key
+    (tmp_path / "kernel.py").write_text('"""Kernels."""\n\n\n@hot\ndef f(x):\n    """x."""\n    return x  # prose\n')
+    assert _source_key(tmp_path) == key  # docstrings and comments are not code: nothing recompiles
     (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return 2 * x\n")
+    assert _source_key(tmp_path) != key
+    (tmp_path / "kernel.py").write_text("@hot\ndef f(x):\n    return '2 * x'\n")  # a string that is code
     assert _source_key(tmp_path) != key
 
 

@@ -16,14 +16,18 @@ Where: numba checks a cached function against its *own* file only, so
 machine code of :mod:`bayes_mr.models.drivers` inlined from an edited
 :mod:`bayes_mr.models.kernel` would be loaded stale, and the old physics
 would run silently. The cache therefore
-lives in a directory named by a hash of every source file of the package
+lives in a directory named by a hash of the code of every source file of the package
 that compiles code (``$NUMBA_CACHE_DIR``, else ``$BAYES_MR_CACHE/numba`` or
 ``~/.cache/bayes_mr/numba``, then ``<hash>/``): an edit of any of them
-starts a fresh cache, an unchanged install reuses its own.
+starts a fresh cache, an unchanged install reuses its own. The hash is of the
+code alone (:func:`code_of`): editing a docstring or a comment recompiles
+nothing, where it would otherwise cost every kernel's compile again (the full
+specialised ones take ten minutes or more each, :mod:`bayes_mr._compile.specialise`).
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import os
 from pathlib import Path
@@ -37,15 +41,32 @@ from bayes_mr._compile.threads import limit_blas, passive_wait
 _MARKERS = (b"@hot", b"@driver", b"njit(")
 
 
+def code_of(source: bytes) -> bytes:
+    """The code of a Python source, without its docstrings and comments: its syntax tree, dumped.
+
+    Two sources with the same code give the same bytes, whatever their prose or layout (a docstring is not
+    code here: no kernel reads ``__doc__``); any other change gives other bytes.
+    """
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree).encode()
+
+
 def _source_key(root: Path | None = None) -> str:
-    """Hash of the compiling source files (names and contents) under ``root`` (default: this package)."""
+    """Hash of the compiling source files (names and code, :func:`code_of`) under ``root`` (default: this
+    package)."""
     h = hashlib.sha256()
     root = Path(__file__).resolve().parents[1] if root is None else Path(root)
     for f in sorted(root.rglob("*.py")):
         data = f.read_bytes()
         if any(m in data for m in _MARKERS):
             h.update(str(f.relative_to(root)).encode())
-            h.update(data)
+            h.update(code_of(data))
     return h.hexdigest()[:16]
 
 

@@ -34,7 +34,7 @@ compile for the test suite.
 
 Cache. The generated modules live in ``$BAYES_MR_CACHE/kernels`` (default ``~/.cache/bayes_mr/kernels``);
 numba caches their machine code next to them (``__pycache__``), so a fresh machine compiles each model once
-and a later process loads it from disk. A module's name hashes the layout, the kernel and the source of
+and a later process loads it from disk. A module's name hashes the layout, the kernel and the code of
 every module the kernel reaches, so editing the physics gives new modules instead of stale machine code
 (numba itself only checks the caller's file). Files are written to a temporary name and renamed, so
 concurrent processes (pytest workers, Dask) never see a partial file; two processes compiling the same
@@ -62,6 +62,7 @@ import numpy as np
 from numba import njit, typeof
 from numba.core.typing.typeof import Purpose
 
+from bayes_mr._compile.jit import code_of
 from bayes_mr._compile.worker import _load, _write_atomic, claim, hand_over, mark_ready, ready_path
 
 #: Environment variable naming the cache directory (generated kernels in its ``kernels`` subdirectory).
@@ -181,11 +182,12 @@ def private_chain(dispatcher, inline: tuple[str, ...] = INLINE):
 
 
 def _fingerprint(dispatcher) -> str:
-    """Hash of the source of every file the kernel reaches (changes when the physics does)."""
+    """Hash of the code of every file the kernel reaches (changes when the physics does, not with its prose:
+    :func:`~bayes_mr._compile.jit.code_of`)."""
     h = hashlib.sha256()
     for f in _reached_files(dispatcher):
         h.update(f.encode())
-        h.update(Path(f).read_bytes())
+        h.update(code_of(Path(f).read_bytes()))
     return h.hexdigest()
 
 
