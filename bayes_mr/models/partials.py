@@ -44,8 +44,8 @@ def _column(jp, fp, i, j, d, g_r, c1):
 def _law(lay, p, u):
     """The current law g(u) the coefficients see (:func:`bayes_mr.models.kernel._saturate`: command_polynomial,
     then command_saturation, then exponential_saturation; u itself without them) and its derivatives:
-    (g, ∂g/∂u, ∂g/∂b2, ∂g/∂b3, ∂g/∂u_s, ∂g/∂u_e), 0 for a law the model does not have."""
-    g, dg, db2, db3, dus, due = u, 1.0, 0.0, 0.0, 0.0, 0.0
+    (g, ∂g/∂u, (∂g/∂b2, ∂g/∂b3, ∂g/∂u_s, ∂g/∂u_e)), each of the last four 0 where the model lacks its law."""
+    g, dg, db2, db3, dus, dsc = u, 1.0, 0.0, 0.0, 0.0, 0.0
     if lay[L_CPOLY] >= 0:
         j = lay[L_CPOLY]
         db2, db3 = u * u, u * u * u
@@ -60,26 +60,25 @@ def _law(lay, p, u):
         dg, db2, db3 = dg * slope, db2 * slope, db3 * slope
         g = us * th
     if lay[L_CEXP] >= 0:
-        ue = p[lay[L_CEXP]]
-        r = abs(g) / ue
+        scale = p[lay[L_CEXP]]  # exponential_saturation's u_e
+        r = abs(g) / scale
         e = math.exp(-r)
-        due = _sgn(g) * (1.0 - e - r * e)
+        dsc = _sgn(g) * (1.0 - e - r * e)
         dg, db2, db3, dus = dg * e, db2 * e, db3 * e, dus * e
-        g = _sgn(g) * ue * (1.0 - e)
-    return g, dg, db2, db3, dus, due
+        g = _sgn(g) * scale * (1.0 - e)
+    return g, dg, (db2, db3, dus, dsc)
 
 
 @hot(inline="always")
-def _law_columns(lay, p, u, jp, fp, i, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer):
-    """The columns of the current laws' parameters (b2, b3, u_s, u_e) at command state ``u``.
+def _law_columns(lay, law, jp, fp, i, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer):
+    """The columns of the current laws' parameters (b2, b3, u_s, u_e), given ``law``: g's derivatives by them
+    (:func:`_law`).
 
     g(u) enters spencer (``spencer`` True) through ẏ, by ``a`` = ∂ẏ/∂g, and its force besides by ``b`` =
     c1b ẏ (:func:`_column`, with ``g_w`` = g_r and ``c`` = c1); it enters a thesis form's hysteretic force by
     ``a`` = ∂f_s/∂g, the strength multiplier by ``b`` (:func:`_via_force`) and the force by ``c`` = c_v ẋ.
     """
-    if lay[L_CPOLY] < 0 and lay[L_CSAT] < 0 and lay[L_CEXP] < 0:
-        return
-    _, _, db2, db3, dus, due = _law(lay, p, u)
+    db2, db3, dus, dsc = law
     if lay[L_CPOLY] >= 0:
         j = lay[L_CPOLY]
         _law_column(jp, fp, i, j, db2, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
@@ -87,7 +86,7 @@ def _law_columns(lay, p, u, jp, fp, i, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spe
     if lay[L_CSAT] >= 0:
         _law_column(jp, fp, i, lay[L_CSAT], dus, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
     if lay[L_CEXP] >= 0:
-        _law_column(jp, fp, i, lay[L_CEXP], due, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
+        _law_column(jp, fp, i, lay[L_CEXP], dsc, a, b, c, g_w, inv_cs, eps_ms, eps_zd, spencer)
 
 
 @hot(inline="always")
@@ -145,18 +144,19 @@ def _fluid_slope(lay, cst, p, xd):
 
 
 @hot(inline="always")
-def _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d, g_r,
-                     c1, c1b, yd, jp, fp, i):
+def _effect_partials(lay, cst, p, t, x, xd, v, us, law, z, sz, eta, alpha0, a_z, m_s, force, bracket, inv_d,
+                     g_r, c1, c1b, yd, jp, fp, i):
     """The effects' columns (:data:`bayes_mr.simulation.sensitivity.COVERED_EFFECTS` of the kernel's):
     stiffness_drift, asymmetry, the current laws, field_decay, force_offset, cubic_stiffness and the fluid
-    forces. ``force`` is k1 x − F_pre (what the drift scales besides α), ``bracket`` ∂ẏ/∂u_e."""
+    forces. ``force`` is k1 x − F_pre (what the drift scales besides α), ``bracket`` ∂ẏ/∂u_e, ``law`` the current
+    law's derivatives by its parameters (:func:`_law`)."""
     if lay[L_DRIFT] >= 0:
         j = lay[L_DRIFT]
         _column(jp, fp, i, j, alpha0 * t * z * a_z * inv_d, g_r, c1)
         fp[j] += t * force
     if lay[L_ASYM] >= 0:
         _column(jp, fp, i, lay[L_ASYM], alpha0 * m_s * z * sz * inv_d, g_r, c1)
-    _law_columns(lay, p, us, jp, fp, i, bracket, c1b * yd, c1, g_r, 0.0, 0.0, 0.0, True)
+    _law_columns(lay, law, jp, fp, i, bracket, c1b * yd, c1, g_r, 0.0, 0.0, 0.0, True)
     if lay[L_FDEC] >= 0:
         jp[i + 2, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
     if lay[L_F0] >= 0:
@@ -192,7 +192,7 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     m_s = 1.0 + p[lay[L_DRIFT]] * t if lay[L_DRIFT] >= 0 else 1.0
     sz = _sgn(z)
     a_z = 1.0 + p[lay[L_ASYM]] * sz if lay[L_ASYM] >= 0 else 1.0
-    ue, due, _, _, _, _ = _law(lay, p, us)
+    ue, due, law = _law(lay, p, us)
     alpha0 = p[o] + ab * ue
     alpha = alpha0 * m_s
     c0 = p[o + 2] + c0b * ue
@@ -233,7 +233,7 @@ def spencer_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     jp[i + 1, o + 11] = r
     jp[i + 1, o + 12] = -(gam * abs(r) * sz + bet * r) * zn * math.log(az) if az > 0.0 else 0.0
     jp[i + 2, o + 13] = rho * (v - us)
-    _effect_partials(lay, cst, p, t, x, xd, v, us, z, sz, eta, alpha0, a_z, m_s, p[o + 7] * x - p[o + 8], bracket,
+    _effect_partials(lay, cst, p, t, x, xd, v, us, law, z, sz, eta, alpha0, a_z, m_s, p[o + 7] * x - p[o + 8], bracket,
                      inv_d, g_r, c1, c1b, yd, jp, fp, i)
     if lay[L_KIND] != DEVICE:
         # x and ẋ are states 0 and 1: ẏ = (… + c0 ẋ + k0 (x − y))/(c0 + c1), and the frame's c ẋ + m_k k x
@@ -287,7 +287,7 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
     vdf = 1.0
     if lay[L_VD] >= 0:
         gain = p[lay[L_VD]]
-        ue, due, _, _, _, _ = _law(lay, p, s[lay[L_SU]])
+        ue, due, law = _law(lay, p, s[lay[L_SU]])
         vdf = 1.0 + gain * ue
     m_s = m_k * vdf
     sz = _sgn(z)
@@ -378,7 +378,7 @@ def thesis_partials(lay, cst, p, t, a, s, js, jp, fs, fp, zn):
         d = -g_w * dfs * inv_cs
         js[i, iu] = d
         fs[iu] = dfs + eps_ms * d + m_k * gain * due * eps_zd + p[j + 1] * due * xd
-        _law_columns(lay, p, us, jp, fp, i, m_k * gain * fz, m_k * gain, p[j + 1] * xd, g_w, inv_cs, eps_ms, eps_zd,
+        _law_columns(lay, law, jp, fp, i, m_k * gain * fz, m_k * gain, p[j + 1] * xd, g_w, inv_cs, eps_ms, eps_zd,
                      False)
         if lay[L_FDEC] >= 0:
             jp[iu, lay[L_FDEC]] = eta * (v - us) if abs(v) < abs(us) else 0.0
