@@ -52,14 +52,15 @@ specialised sensitivity kernel where one is on disk but never starts its compile
 :data:`~bayes_mr._compile.specialise.INLINED_TIER`); ``BAYES_MR_KERNELS=specialised`` compiles it.
 
 Covered (:func:`bayes_mr.simulation.sensitivity.covered`): every form
-(:func:`~bayes_mr.models.partials.spencer_partials`, :func:`~bayes_mr.models.partials.thesis_partials`) in a device, structure or forced test, with any of the effects whose partials they
-have: ``force_offset``, ``stiffness_drift``, ``asymmetry``, ``voltage_dependence`` (thesis forms), the current
-laws (``command_polynomial``, ``command_saturation``, ``exponential_saturation``), ``field_decay``,
+(:func:`~bayes_mr.models.partials.spencer_partials`, :func:`~bayes_mr.models.partials.thesis_partials`) in a
+device, structure or forced test, with any of the effects whose partials they have: ``force_offset``,
+``stiffness_drift``, ``asymmetry``, ``voltage_dependence`` (thesis forms), the current laws
+(``command_polynomial``, ``command_saturation``, ``exponential_saturation``), ``field_decay``,
 ``low_velocity_rolloff`` (thesis forms), ``cubic_stiffness``, ``shear_thinning``, ``stribeck_friction``;
-``inertia`` and ``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`.
-The others keep finite differences: the effects with discrete updates between sub-steps (``field_dynamics``,
-``small_amplitude_regime``) and the library terms. A structure or forced test's
-damper-force output has no derivatives here.
+``inertia`` and ``sensor_delay`` act on the output and are applied by :mod:`bayes_mr.simulation.sensitivity`. The
+others keep finite differences: the effects with discrete updates between sub-steps (``field_dynamics``,
+``small_amplitude_regime``) and the library terms. A structure or forced test's damper-force output has no
+derivatives here.
 Where the law has a kink (``|ẋ − ẏ|``, ``sgn z``, ``sgn w``) the derivative is that of the side the state is
 on, which is what a finite difference of a step that does not cross it sees.
 """

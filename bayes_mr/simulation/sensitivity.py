@@ -26,8 +26,9 @@ from bayes_mr.simulation.simulate import OUTPUT_NAMES, delay, note
 #: to the kernel's force here, as :func:`~bayes_mr.simulation.simulate.simulate` applies them (``inertia``,
 #: ``sensor_delay``).
 COVERED_EFFECTS = frozenset({"force_offset", "stiffness_drift", "asymmetry", "voltage_dependence",
-                             "command_saturation", "command_polynomial", "exponential_saturation", "field_decay", "low_velocity_rolloff", "cubic_stiffness",
-                             "shear_thinning", "stribeck_friction", "inertia", "sensor_delay"})
+                             "command_saturation", "command_polynomial", "exponential_saturation", "field_decay",
+                             "low_velocity_rolloff", "cubic_stiffness", "shear_thinning", "stribeck_friction",
+                             "inertia", "sensor_delay"})
 #: Forms, by kind of test, whose partial derivatives it has.
 COVERED_FORMS = {kind: frozenset({"spencer", "normalized-bouc-wen", "dahl", "lugre", "bouc-wen"})
                  for kind in ("device", "structure", "forced")}
